@@ -1,0 +1,133 @@
+"""Stencil batches: the one place where topology (Python) meets cost (JAX).
+
+A *stencil* is the local piece of a triangulation that one candidate operation
+changes, written as it would be *after* the operation: the local edges and the
+input points whose assignment may change. A *batch* stacks B stencils, padded to
+a common capacity so that one ``jit``-compiled call scores them all.
+
+Capacities come from :class:`Buckets`: powers of two that only ever grow (the
+jax-md neighbour-list pattern: fixed capacity, overflow detected on the host,
+reallocate). A stencil is never truncated.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+
+
+class EdgeStencil(NamedTuple):
+    """A batch of 2D edge stencils, padded to fixed capacities.
+
+    Shapes (``B`` candidates, ``E`` local edges, ``P`` local points):
+
+    Attributes:
+      edges: ``(B, E, 2, 2)`` float. Endpoint coordinates of each local edge.
+        ``edges[b, e, 0]`` is the endpoint with the lower global vertex id, so
+        that every stencil orients a shared edge the same way. Padding: zeros.
+      edge_mask: ``(B, E)`` bool. True for real edges.
+      points: ``(B, P, 2)`` float. Input points of the stencil. Padding: zeros.
+      mass: ``(B, P)`` float, ``>= 0``. Point masses; ``0`` on padding.
+      point_mask: ``(B, P)`` bool. True for real points.
+      cand: ``(B, P, 3)`` int32. Local edges a point may be assigned to (the
+        three edges of the triangle that contains it, or one edge repeated for
+        a point whose assignment is fixed). The nearest wins; exact ties go to
+        the earliest entry, and the host lists entries in increasing global
+        edge key, so ties are broken the same way everywhere. Padding: ``0``.
+
+    Padded points have zero mass and padded edges receive no point, so padding
+    contributes exactly zero cost and zero gradient.
+    """
+
+    edges: np.ndarray
+    edge_mask: np.ndarray
+    points: np.ndarray
+    mass: np.ndarray
+    point_mask: np.ndarray
+    cand: np.ndarray
+
+    @property
+    def shape(self) -> tuple[int, int, int]:
+        """``(B, E, P)`` capacities of this batch."""
+        b, e = self.edge_mask.shape
+        return b, e, self.point_mask.shape[1]
+
+
+def _next_pow2(n: int, floor: int) -> int:
+    size = floor
+    while size < n:
+        size *= 2
+    return size
+
+
+class Buckets:
+    """Padded capacities for stencil batches, grown on overflow, never shrunk.
+
+    Edge and point capacities are high-water marks rounded up to powers of
+    two: a stencil larger than the current capacity grows it (one recompile),
+    and every later batch uses the grown capacity. During greedy decimation the
+    stencils grow as the mesh coarsens, so the high-water mark wastes little
+    padding and the number of compiled shapes stays logarithmic. Batch sizes
+    are rounded to powers of two of at least ``min_batch``.
+
+    Args:
+      min_edges: initial edge capacity (power of two).
+      min_points: initial point capacity (power of two).
+      min_batch: smallest batch capacity (power of two).
+    """
+
+    def __init__(self, min_edges: int = 16, min_points: int = 32, min_batch: int = 16):
+        for name, v in (("min_edges", min_edges), ("min_points", min_points), ("min_batch", min_batch)):
+            if v < 1 or v & (v - 1):
+                raise ValueError(f"{name} must be a positive power of two, got {v}")
+        self.edges = min_edges
+        self.points = min_points
+        self.min_batch = min_batch
+        self.shapes_seen: set[tuple[int, int, int]] = set()
+
+    def fit(self, n_batch: int, max_edges: int, max_points: int) -> tuple[int, int, int]:
+        """Capacities ``(B, E, P)`` for a batch; grows the high-water marks."""
+        self.edges = _next_pow2(max_edges, self.edges)
+        self.points = _next_pow2(max_points, self.points)
+        shape = (_next_pow2(n_batch, self.min_batch), self.edges, self.points)
+        self.shapes_seen.add(shape)
+        return shape
+
+
+def pack_edge_stencils(
+    stencils: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]],
+    buckets: Buckets,
+    dtype=np.float64,
+) -> EdgeStencil:
+    """Pads a list of single stencils into one :class:`EdgeStencil` batch.
+
+    Args:
+      stencils: per candidate ``(edges (E_i, 2, 2), points (P_i, 2),
+        mass (P_i,), cand (P_i, 3))``.
+      buckets: capacity policy; grown if a stencil does not fit.
+      dtype: float dtype of coordinates and masses.
+
+    Returns:
+      A batch whose first ``len(stencils)`` rows hold the stencils in order;
+      the remaining rows are empty (all-masked) padding.
+    """
+    n = len(stencils)
+    max_e = max((len(s[0]) for s in stencils), default=1)
+    max_p = max((len(s[1]) for s in stencils), default=1)
+    b_cap, e_cap, p_cap = buckets.fit(n, max(max_e, 1), max(max_p, 1))
+    edges = np.zeros((b_cap, e_cap, 2, 2), dtype)
+    edge_mask = np.zeros((b_cap, e_cap), bool)
+    points = np.zeros((b_cap, p_cap, 2), dtype)
+    mass = np.zeros((b_cap, p_cap), dtype)
+    point_mask = np.zeros((b_cap, p_cap), bool)
+    cand = np.zeros((b_cap, p_cap, 3), np.int32)
+    for i, (e, p, m, c) in enumerate(stencils):
+        ne, npt = len(e), len(p)
+        edges[i, :ne] = e
+        edge_mask[i, :ne] = True
+        points[i, :npt] = p
+        mass[i, :npt] = m
+        point_mask[i, :npt] = True
+        cand[i, :npt] = c
+    return EdgeStencil(edges, edge_mask, points, mass, point_mask, cand)
