@@ -68,29 +68,45 @@ class Buckets:
     two: a stencil larger than the current capacity grows it (one recompile),
     and every later batch uses the grown capacity. During greedy decimation the
     stencils grow as the mesh coarsens, so the high-water mark wastes little
-    padding and the number of compiled shapes stays logarithmic. Batch sizes
-    are rounded to powers of two of at least ``min_batch``.
+    padding and the sequence of capacities visited is monotone: at most
+    ``log2`` many. Batch capacities come from a short fixed list; a longer
+    list of candidates is split into chunks of the largest one.
 
     Args:
       min_edges: initial edge capacity (power of two).
       min_points: initial point capacity (power of two).
-      min_batch: smallest batch capacity (power of two).
+      batch_sizes: increasing batch capacities (the small one fits the dirty
+        region of one collapse, the large one bulk scoring).
+
+    Attributes:
+      shapes_seen: every ``(B, E, P)`` handed out so far; its size bounds the
+        number of compilations of a kernel driven by these buckets.
     """
 
-    def __init__(self, min_edges: int = 16, min_points: int = 32, min_batch: int = 16):
-        for name, v in (("min_edges", min_edges), ("min_points", min_points), ("min_batch", min_batch)):
+    def __init__(self, min_edges: int = 16, min_points: int = 32, batch_sizes: tuple[int, ...] = (64, 256)):
+        for name, v in (("min_edges", min_edges), ("min_points", min_points)):
             if v < 1 or v & (v - 1):
                 raise ValueError(f"{name} must be a positive power of two, got {v}")
+        if not batch_sizes or any(b < 1 for b in batch_sizes) or list(batch_sizes) != sorted(batch_sizes):
+            raise ValueError(f"batch_sizes must be increasing positive integers, got {batch_sizes}")
         self.edges = min_edges
         self.points = min_points
-        self.min_batch = min_batch
+        self.batch_sizes = tuple(batch_sizes)
         self.shapes_seen: set[tuple[int, int, int]] = set()
+
+    @property
+    def max_batch(self) -> int:
+        """Largest batch capacity; longer candidate lists are chunked to it."""
+        return self.batch_sizes[-1]
 
     def fit(self, n_batch: int, max_edges: int, max_points: int) -> tuple[int, int, int]:
         """Capacities ``(B, E, P)`` for a batch; grows the high-water marks."""
+        if n_batch > self.max_batch:
+            raise ValueError(f"batch of {n_batch} exceeds the largest capacity {self.max_batch}; chunk it")
         self.edges = _next_pow2(max_edges, self.edges)
         self.points = _next_pow2(max_points, self.points)
-        shape = (_next_pow2(n_batch, self.min_batch), self.edges, self.points)
+        b = next(b for b in self.batch_sizes if b >= n_batch)
+        shape = (b, self.edges, self.points)
         self.shapes_seen.add(shape)
         return shape
 

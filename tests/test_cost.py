@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import functools
+
 import jax
 
 jax.config.update("jax_enable_x64", True)
@@ -17,8 +19,26 @@ from otjax.curves import cost  # noqa: E402
 from otjax.stencil import Buckets, EdgeStencil, pack_edge_stencils  # noqa: E402
 from tests.oracles import oracle_edge_cost, oracle_segment_sqdist, oracle_stencil_cost  # noqa: E402
 
-BATCHED = {"rank": cost.batched_stencil_cost_rank, "sort": cost.batched_stencil_cost_sort}
+METHODS = cost.TANGENTIAL_METHODS
 PER_EDGE = ("edge_cost", "normal", "tangential", "vertex", "edge_mass")
+
+
+# Both formulations in ONE compiled function, so each padded shape compiles
+# once; every test below reuses a handful of shapes.
+@jax.jit
+def both_methods(batch: EdgeStencil) -> dict:
+    return {m: jax.vmap(functools.partial(cost.stencil_cost, tangential_method=m))(batch) for m in METHODS}
+
+
+def run_both(batch: EdgeStencil) -> dict:
+    return jax.tree.map(np.asarray, both_methods(batch))
+
+
+def single(stencil: EdgeStencil, capacity=(16, 32)) -> EdgeStencil:
+    """Packs one hand-made stencil into the (already compiled) default shape."""
+    return pack_edge_stencils(
+        [(stencil.edges, stencil.points, stencil.mass, stencil.cand)], Buckets(*capacity)
+    )
 
 
 # ----------------------------------------------------------------------------
@@ -78,17 +98,23 @@ def row(batch: EdgeStencil, b: int) -> EdgeStencil:
     return EdgeStencil(*(np.asarray(x[b]) for x in batch))
 
 
-def assert_matches_oracle(batch: EdgeStencil, got, rtol=1e-9, check_flags=True):
-    for b in range(batch.shape[0]):
-        want = oracle_stencil_cost(*row(batch, b))
-        scale = sum(want["normal"]) + sum(want["tangential"]) + sum(want["vertex"])
+N_REAL = 4  # real stencils per oracle batch; the other rows are padding
+
+
+def assert_matches_oracle(batch: EdgeStencil, got, want: list[dict]):
+    for b, w in enumerate(want):
+        scale = sum(w["normal"]) + sum(w["tangential"]) + sum(w["vertex"])
         atol = 1e-12 * scale + 1e-300
         for key in PER_EDGE:
-            np.testing.assert_allclose(getattr(got, key)[b], want[key], rtol=rtol, atol=atol, err_msg=f"{key}[{b}]")
-        np.testing.assert_allclose(got.total[b], want["total"], rtol=rtol, atol=atol)
-        if check_flags:
-            np.testing.assert_array_equal(got.solid[b], want["solid"])
-            np.testing.assert_array_equal(got.assignment[b], want["assignment"])
+            np.testing.assert_allclose(getattr(got, key)[b], w[key], rtol=1e-9, atol=atol, err_msg=f"{key}[{b}]")
+        np.testing.assert_allclose(got.total[b], w["total"], rtol=1e-9, atol=atol)
+        np.testing.assert_array_equal(got.solid[b], w["solid"])
+        np.testing.assert_array_equal(got.assignment[b], w["assignment"])
+    # Empty (padding) rows cost exactly nothing.
+    pad = slice(len(want), None)
+    for key in PER_EDGE + ("total",):
+        assert np.all(getattr(got, key)[pad] == 0), key
+    assert not got.solid[pad].any() and np.all(got.assignment[pad] == -1)
 
 
 # ----------------------------------------------------------------------------
@@ -96,7 +122,7 @@ def assert_matches_oracle(batch: EdgeStencil, got, rtol=1e-9, check_flags=True):
 
 
 @pytest.fixture(scope="module", params=[(e, p) for e in (16, 32, 64) for p in (32, 64, 128, 256)], ids=str)
-def bucket_batch(request):
+def bucket_case(request):
     e_cap, p_cap = request.param
     rng = np.random.default_rng(1000 * e_cap + p_cap)
     stencils = [
@@ -105,36 +131,47 @@ def bucket_batch(request):
         make_stencil(rng, 3, 7, short_edge=False),
         make_stencil(rng, e_cap, 1),
     ]
+    assert len(stencils) == N_REAL
     batch = pack_edge_stencils(stencils, Buckets(min_edges=e_cap, min_points=p_cap))
-    assert batch.shape == (16, e_cap, p_cap)
-    return batch
+    assert batch.shape[1:] == (e_cap, p_cap)
+    want = [oracle_stencil_cost(*row(batch, b)) for b in range(N_REAL)]
+    return batch, want
 
 
-@pytest.mark.parametrize("method", ["rank", "sort"])
-def test_matches_oracle_at_bucket_sizes(bucket_batch, method):
-    got = jax.tree.map(np.asarray, BATCHED[method](bucket_batch))
-    assert_matches_oracle(bucket_batch, got)
-    # Empty (padding) rows cost exactly nothing.
-    assert np.all(got.total[4:] == 0) and np.all(got.assignment[4:] == -1)
+def test_matches_oracle_at_bucket_sizes(bucket_case):
+    batch, want = bucket_case
+    got = run_both(batch)
+    for method in METHODS:
+        assert_matches_oracle(batch, got[method], want)
     # The generator does exercise both outcomes.
-    assert got.solid.any() and (~got.solid & bucket_batch.edge_mask & (got.edge_mass > 0)).any()
+    g = got[METHODS[0]]
+    assert g.solid.any() and (~g.solid & batch.edge_mask & (g.edge_mass > 0)).any()
 
 
-def test_default_method_is_exposed():
-    assert cost.DEFAULT_TANGENTIAL_METHOD in cost.TANGENTIAL_METHODS
-    assert cost.batched_stencil_cost is BATCHED[cost.DEFAULT_TANGENTIAL_METHOD]
+def test_public_batched_functions():
+    assert cost.DEFAULT_TANGENTIAL_METHOD in METHODS
+    assert cost.batched_stencil_cost is {"rank": cost.batched_stencil_cost_rank, "sort": cost.batched_stencil_cost_sort}[
+        cost.DEFAULT_TANGENTIAL_METHOD
+    ]
+    rng = np.random.default_rng(5)
+    batch = pack_edge_stencils([make_stencil(rng, 16, 32) for _ in range(3)], Buckets(16, 32))
+    got = jax.tree.map(np.asarray, cost.batched_stencil_cost(batch))
+    want = run_both(batch)[cost.DEFAULT_TANGENTIAL_METHOD]
+    for key in PER_EDGE + ("total", "solid", "assignment"):
+        np.testing.assert_array_equal(getattr(got, key), getattr(want, key))
+    with pytest.raises(ValueError):
+        cost.stencil_cost(row(batch, 0), "bogus")
 
 
 def test_float32_runs_and_roughly_matches():
     rng = np.random.default_rng(7)
     stencils = [make_stencil(rng, 16, 32, short_edge=False) for _ in range(3)]
-    b64 = pack_edge_stencils(stencils, Buckets(min_edges=16, min_points=32))
-    b32 = pack_edge_stencils(stencils, Buckets(min_edges=16, min_points=32), dtype=np.float32)
-    for method in ("rank", "sort"):
-        got = BATCHED[method](b32)
-        assert got.total.dtype == jnp.float32
-        want = np.asarray(BATCHED[method](b64).total)
-        np.testing.assert_allclose(np.asarray(got.total), want, rtol=1e-4)
+    b64 = pack_edge_stencils(stencils, Buckets(16, 32))
+    b32 = pack_edge_stencils(stencils, Buckets(16, 32), dtype=np.float32)
+    got32, got64 = both_methods(b32), run_both(b64)
+    for method in METHODS:
+        assert got32[method].total.dtype == jnp.float32
+        np.testing.assert_allclose(np.asarray(got32[method].total), got64[method].total, rtol=1e-4)
 
 
 # ----------------------------------------------------------------------------
@@ -152,7 +189,7 @@ def test_uniform_sampling_tangential():
     # normal offsets.
     n, length, mass = 5, 3.0, 2.0
     xs = (np.arange(n) + 0.5) * length / n
-    pts = np.stack([xs, np.linspace(-0.1, 0.1, n)], axis=1)
+    pts = np.stack([xs, np.linspace(-0.1, 0.1, n)], axis=1)[::-1]  # unsorted input
     stencil = EdgeStencil(
         edges=np.array([[[0.0, 0.0], [length, 0.0]]]),
         edge_mask=np.array([True]),
@@ -161,35 +198,36 @@ def test_uniform_sampling_tangential():
         point_mask=np.ones(n, bool),
         cand=np.zeros((n, 3), np.int32),
     )
-    for method in ("rank", "sort"):
-        got = cost.stencil_cost(stencil, method)
-        np.testing.assert_allclose(got.tangential[0], mass * length**2 / (12 * n**2), rtol=1e-12)
-        np.testing.assert_allclose(got.normal[0], np.sum(mass / n * pts[:, 1] ** 2), rtol=1e-12)
-        assert bool(got.solid[0])
-    assert oracle_edge_cost([0, 0], [length, 0], pts, np.full(n, mass / n))[1] == pytest.approx(
-        mass * length**2 / (12 * n**2)
-    )
+    expected = mass * length**2 / (12 * n**2)
+    got = run_both(single(stencil))
+    for method in METHODS:
+        np.testing.assert_allclose(got[method].tangential[0, 0], expected, rtol=1e-12)
+        np.testing.assert_allclose(got[method].normal[0, 0], np.sum(mass / n * pts[:, 1] ** 2), rtol=1e-12)
+        assert got[method].solid[0, 0]
+    assert oracle_edge_cost([0, 0], [length, 0], pts, np.full(n, mass / n))[1] == pytest.approx(expected)
 
 
 def test_vertex_ties_are_exact_and_go_to_the_earliest_candidate():
     a, b, c = np.array([0.0, 0.0]), np.array([1.0, 0.3]), np.array([0.2, 0.9])
-    p = np.array([[-0.3, -0.2], [0.0, 0.0]])  # vertex region of a; on a
+    p = np.array([[-0.3, -0.2], [0.0, 0.0], [1.0, 0.3]])  # vertex region of a; on a; on b
     d_ab = cost.segment_sqdist(p, a, b)
     d_ac = cost.segment_sqdist(p, a, c)
     d_ca = cost.segment_sqdist(p, c, a)  # a as second endpoint
-    np.testing.assert_array_equal(d_ab, d_ac)
-    np.testing.assert_array_equal(d_ab, d_ca)
-    assert float(d_ab[1]) == 0.0
+    np.testing.assert_array_equal(d_ab[:2], d_ac[:2])
+    np.testing.assert_array_equal(d_ab[:2], d_ca[:2])
+    assert float(d_ab[1]) == 0.0 and float(d_ab[2]) == 0.0
     assert oracle_segment_sqdist(p[0], a, b) == float(d_ab[0])
     stencil = EdgeStencil(
         edges=np.array([[c, a], [a, b], [b, c]]),
         edge_mask=np.ones(3, bool),
         points=p,
-        mass=np.ones(2),
-        point_mask=np.ones(2, bool),
-        cand=np.array([[1, 0, 2], [0, 1, 2]], np.int32),
+        mass=np.ones(3),
+        point_mask=np.ones(3, bool),
+        cand=np.array([[1, 0, 2], [0, 1, 2], [2, 1, 0]], np.int32),
     )
-    np.testing.assert_array_equal(cost.assign_points(stencil), [1, 0])
+    # Same answer inside the compiled batched kernel (where fusion may differ).
+    for method in METHODS:
+        np.testing.assert_array_equal(run_both(single(stencil))[method].assignment[0, :3], [1, 0, 2])
 
 
 def test_segment_sqdist_interior():
@@ -203,8 +241,8 @@ def test_segment_sqdist_interior():
 # ----------------------------------------------------------------------------
 # Refinement stability (paper, after Eq. 4).
 
-REFINE_BUCKETS = dict(min_edges=16, min_points=128)
-MAX_REFINE_POINTS = 25  # x5 copies fits the 128-point bucket: one compiled shape
+REFINE_BUCKETS = dict(min_edges=16, min_points=128)  # a shape compiled above
+MAX_REFINE_POINTS = 25  # x5 copies still fit 128 points
 
 coord = st.floats(-1.0, 1.0, allow_nan=False, allow_subnormal=False)
 xy = st.tuples(coord, coord)
@@ -216,12 +254,10 @@ def refinable_stencils(draw):
     edges = np.array(draw(st.lists(st.tuples(xy, xy), min_size=n_edges, max_size=n_edges)), float)
     n = draw(st.integers(1, MAX_REFINE_POINTS))
     points = np.array(draw(st.lists(xy, min_size=n, max_size=n)), float)
-    mass = np.array(
-        draw(st.lists(st.one_of(st.just(0.0), st.floats(1e-3, 1.0)), min_size=n, max_size=n)), float
-    )
-    cand = np.array(draw(st.lists(st.lists(st.integers(0, n_edges - 1), min_size=3, max_size=3), min_size=n, max_size=n)))
+    mass = np.array(draw(st.lists(st.one_of(st.just(0.0), st.floats(1e-3, 1.0)), min_size=n, max_size=n)), float)
+    cand = draw(st.lists(st.lists(st.integers(0, n_edges - 1), min_size=3, max_size=3), min_size=n, max_size=n))
     k = draw(st.integers(2, 5))
-    return edges, points, mass, cand.astype(np.int32), k
+    return edges, points, mass, np.array(cand, np.int32), k
 
 
 @settings(max_examples=40, deadline=None)
@@ -230,60 +266,71 @@ def test_refinement_stability(data):
     edges, points, mass, cand, k = data
     fine = (edges, np.repeat(points, k, axis=0), np.repeat(mass / k, k), np.repeat(cand, k, axis=0))
     batch = pack_edge_stencils([(edges, points, mass, cand), fine], Buckets(**REFINE_BUCKETS))
-    for method in ("rank", "sort"):
-        got = jax.tree.map(np.asarray, BATCHED[method](batch))
-        scale = float(np.sum(got.normal[0] + got.tangential[0] + got.vertex[0]))
+    got = run_both(batch)
+    for method in METHODS:
+        g = got[method]
+        scale = float(np.sum(g.normal[0] + g.tangential[0] + g.vertex[0]))
         atol = 1e-12 * scale + 1e-300
-        for key in PER_EDGE:
-            np.testing.assert_allclose(getattr(got, key)[1], getattr(got, key)[0], rtol=1e-9, atol=atol, err_msg=key)
-        np.testing.assert_allclose(got.total[1], got.total[0], rtol=1e-9, atol=atol)
+        for key in PER_EDGE + ("total",):
+            np.testing.assert_allclose(getattr(g, key)[1], getattr(g, key)[0], rtol=1e-9, atol=atol, err_msg=key)
 
 
 # ----------------------------------------------------------------------------
 # Gradients.
 
 
-def _degenerate_batch():
+def _total(edges, points, mass, batch, method):
+    s = batch._replace(edges=edges, points=points, mass=mass)
+    return jnp.sum(jax.vmap(functools.partial(cost.stencil_cost, tangential_method=method))(s).total)
+
+
+@jax.jit
+def grads_both(batch: EdgeStencil) -> dict:
+    return {
+        m: jax.grad(_total, argnums=(0, 1, 2))(batch.edges, batch.points, batch.mass, batch, m) for m in METHODS
+    }
+
+
+def test_gradients_are_finite():
     rng = np.random.default_rng(3)
     edges, points, mass, cand = make_stencil(rng, 12, 20)
     edges[2, 1] = edges[2, 0]  # zero-length edge
     cand[:4] = 2  # ... that receives points
     points[4] = edges[0, 0]  # exactly on a vertex
-    mass[5:8] = 0.0
-    cand[5:8] = 3  # an edge whose points all have zero mass
-    batch = pack_edge_stencils([(edges, points, mass, cand)], Buckets(min_edges=16, min_points=32))
-    return batch, len(edges)
+    cand[5:8] = 3
+    mass[(cand == 3).any(axis=1)] = 0.0  # an edge whose points all have zero mass
+    batch = pack_edge_stencils([(edges, points, mass, cand)], Buckets(16, 32))
 
-
-@pytest.mark.parametrize("method", ["rank", "sort"])
-def test_gradients_are_finite(method):
-    batch, n_edges = _degenerate_batch()
-
-    def total(edges, points, mass):
-        return jnp.sum(BATCHED[method](batch._replace(edges=edges, points=points, mass=mass)).total)
-
-    out = BATCHED[method](batch)
-    assert not out.solid[0, 2] and float(out.normal[0, 2]) == 0.0
-    grads = jax.grad(total, argnums=(0, 1, 2))(batch.edges, batch.points, batch.mass)
-    for g in grads:
-        assert np.all(np.isfinite(np.asarray(g)))
-    # Padding gets exactly zero gradient.
-    g_edges, g_points, _ = (np.asarray(g) for g in grads)
-    assert np.all(g_edges[1:] == 0) and np.all(g_edges[0, n_edges:] == 0)
-    assert np.all(g_points[1:] == 0) and np.all(g_points[0, 20:] == 0)
+    out = run_both(batch)
+    for method in METHODS:
+        assert not out[method].solid[0, 2] and out[method].normal[0, 2] == 0.0
+        assert out[method].edge_mass[0, 3] == 0.0 and out[method].edge_cost[0, 3] == 0.0
+    grads = jax.tree.map(np.asarray, grads_both(batch))
+    for method in METHODS:
+        g_edges, g_points, g_mass = grads[method]
+        for g in (g_edges, g_points, g_mass):
+            assert np.all(np.isfinite(g))
+        # Padding gets exactly zero gradient.
+        assert np.all(g_edges[1:] == 0) and np.all(g_edges[0, len(edges) :] == 0)
+        assert np.all(g_points[1:] == 0) and np.all(g_points[0, len(points) :] == 0)
 
 
 def test_gradient_matches_finite_differences():
     rng = np.random.default_rng(11)
-    batch = pack_edge_stencils([make_stencil(rng, 12, 20, short_edge=False)], Buckets(min_edges=16, min_points=32))
-
-    def total(points):
-        return jnp.sum(cost.batched_stencil_cost(batch._replace(points=points)).total)
-
-    g = np.asarray(jax.grad(total)(batch.points))
+    batch = pack_edge_stencils([make_stencil(rng, 12, 20, short_edge=False)], Buckets(16, 32))
+    grads = grads_both(batch)
     h = 1e-6
-    for i, j in [(0, 0), (3, 1), (7, 0), (12, 1)]:
-        dp = np.zeros_like(batch.points)
-        dp[0, i, j] = h
-        fd = (float(total(batch.points + dp)) - float(total(batch.points - dp))) / (2 * h)
-        np.testing.assert_allclose(g[0, i, j], fd, rtol=1e-5, atol=1e-8)
+    probes = [(0, 0), (3, 1), (7, 0), (12, 1)]
+    shifted = []
+    for i, j in probes:
+        for sign in (1, -1):
+            p = batch.points.copy()
+            p[0, i, j] += sign * h
+            shifted.append(batch._replace(points=p))
+    # One batch of rows per probe would be a new shape; reuse the compiled one.
+    totals = [run_both(s) for s in shifted]
+    for method in METHODS:
+        g = np.asarray(grads[method][1])
+        for n, (i, j) in enumerate(probes):
+            fd = (totals[2 * n][method].total[0] - totals[2 * n + 1][method].total[0]) / (2 * h)
+            np.testing.assert_allclose(g[0, i, j], fd, rtol=1e-5, atol=1e-8)

@@ -158,7 +158,7 @@ class TransportPlan:
         uniq, starts = np.unique(keys[order], return_index=True)
         groups = np.split(order, starts[1:])
         xy = self.tri.xy
-        chunk = 256
+        chunk = self.buckets.max_batch
         for s in range(0, len(groups), chunk):
             stencils, ekeys = [], []
             for g in groups[s:s + chunk]:
@@ -227,26 +227,39 @@ class TransportPlan:
             [(c.edges, self.points[c.point_ids], self.mass[c.point_ids], c.cand) for c in cands],
             self.buckets, self.dtype)
 
-    def score(self, cands: list[CandidateStencil]) -> tuple[np.ndarray, object]:
-        """Cost increase ``delta`` of each candidate, in one kernel call.
+    def score(self, cands: list[CandidateStencil]) -> tuple[np.ndarray, list[tuple[object, int]]]:
+        """Cost increase ``delta`` of each candidate, batched.
+
+        Candidates are scored in as few kernel calls as the bucket capacities
+        allow (one, for the dirty region of a single collapse).
 
         Returns:
-          ``(delta (len(cands),), result)`` with ``result`` the kernel output
-          (rows beyond ``len(cands)`` are padding).
+          ``(delta (len(cands),), rows)``; ``rows[i] = (result, r)`` locates
+          candidate ``i`` in a kernel result, to pass to :meth:`apply`.
         """
-        res = self.evaluate(self.pack(cands))
-        before = np.array([c.before for c in cands])
-        return np.asarray(res.total[: len(cands)]) - before, res
+        deltas, rows = [], []
+        step = self.buckets.max_batch
+        for s in range(0, len(cands), step):
+            chunk = cands[s:s + step]
+            res = self.evaluate(self.pack(chunk))
+            deltas.append(np.asarray(res.total[: len(chunk)]) - np.array([c.before for c in chunk]))
+            rows += [(res, r) for r in range(len(chunk))]
+        return (np.concatenate(deltas) if deltas else np.zeros(0)), rows
 
     # ------------------------------------------------------------- mutation
-    def apply(self, cand: CandidateStencil, res, row: int) -> None:
+    def apply(self, cand: CandidateStencil, scored: tuple[object, int]) -> set[int]:
         """Performs a scored collapse and updates points, edges and costs.
 
         Args:
           cand: the candidate (exported against the current state).
-          res: kernel result holding the candidate's row.
-          row: the candidate's row in ``res``.
+          scored: its ``(result, row)`` from :meth:`score`.
+
+        Returns:
+          The *dirty* vertices: every half-edge leaving one of them has a
+          stencil that overlaps the change and must be re-scored (paper,
+          Fig. 6: the modified one-ring and its flap vertices).
         """
+        res, row = scored
         plan = cand.plan
         new_ids = np.asarray(self.tri.collapse(plan), np.int64)
         n_in = int((cand.triangle_of_point >= 0).sum())
@@ -270,3 +283,11 @@ class TransportPlan:
             k = (int(a), int(b))
             self.edge_cost[k] = float(res.edge_cost[row, i])
             self.edge_solid[k] = bool(res.solid[row, i])
+        dirty = set(plan.ring)
+        dirty.add(plan.target)
+        tri = self.tri
+        for f in new_ids:
+            for g in tri.nbr[f]:
+                if g >= 0:
+                    dirty.update(tri.tri[g])
+        return {v for v in dirty if not tri.pinned[v]}

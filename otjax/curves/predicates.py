@@ -32,6 +32,22 @@ def _exact_orient(ax, ay, bx, by, cx, cy) -> int:
     return (det > 0) - (det < 0)
 
 
+def orient_scalar(ax: float, ay: float, bx: float, by: float, cx: float, cy: float) -> int:
+    """Exact orientation sign of one triangle given as six Python floats.
+
+    The same predicate as :func:`orient`, without NumPy's per-call overhead,
+    for the topology code that asks one question at a time.
+    """
+    left = (bx - ax) * (cy - ay)
+    right = (by - ay) * (cx - ax)
+    det = left - right
+    if abs(det) > _ORIENT_ERR * (abs(left) + abs(right)):
+        return 1 if det > 0 else -1
+    if (cx == bx and cy == by) or ((bx == ax or cy == ay) and (by == ay or cx == ax)):
+        return 0
+    return _exact_orient(ax, ay, bx, by, cx, cy)
+
+
 def orient(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
     """Exact sign of the orientation of triangles ``(a, b, c)``.
 
@@ -57,6 +73,7 @@ def orient(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
     zero = ((b[..., 0] == a[..., 0]) | (c[..., 1] == a[..., 1])) & (
         (b[..., 1] == a[..., 1]) | (c[..., 0] == a[..., 0])
     )
+    zero |= (c[..., 0] == b[..., 0]) & (c[..., 1] == b[..., 1])  # repeated point
     unsure = ~(np.abs(det) > bound) & ~zero
     if np.any(unsure):
         shape = sign.shape

@@ -20,7 +20,7 @@ from typing import NamedTuple
 import numpy as np
 from scipy.spatial import Delaunay
 
-from otjax.curves.predicates import in_triangle_perturbed, orient
+from otjax.curves.predicates import in_triangle_perturbed, orient, orient_scalar
 
 N_CORNERS = 4
 
@@ -58,8 +58,9 @@ def edge_key(u: int, v: int) -> tuple[int, int]:
     return (u, v) if u < v else (v, u)
 
 
-def _orient1(xy: np.ndarray, a: int, b: int, c: int) -> int:
-    return int(orient(xy[a], xy[b], xy[c]))
+def _orient1(xy: list, a: int, b: int, c: int) -> int:
+    (ax, ay), (bx, by), (cx, cy) = xy[a], xy[b], xy[c]
+    return orient_scalar(ax, ay, bx, by, cx, cy)
 
 
 class Triangulation:
@@ -141,6 +142,7 @@ class Triangulation:
         else:
             raise RuntimeError("could not build an embedded initial triangulation")
         self.alive = use.copy()
+        self._xyl = self.xy.tolist()  # scalar predicates read Python floats
         self.tri = simp.tolist()
         self.nbr = nbr.tolist()
         self.vface = [-1] * len(self.xy)
@@ -229,7 +231,7 @@ class Triangulation:
             a, b = polygon[k], polygon[(k + 1) % n]
             if v in (a, b):
                 continue
-            if _orient1(self.xy, v, a, b) <= 0:
+            if _orient1(self._xyl, v, a, b) <= 0:
                 return False
         return True
 
@@ -289,7 +291,7 @@ class Triangulation:
         def cut(a: int, b: int) -> float:
             # Distance from target to where line (a, b) crosses source->target:
             # how much removing (a, b) from the polygon elongates its kernel.
-            if _orient1(xy, target, a, b) > 0:
+            if _orient1(self._xyl, target, a, b) > 0:
                 return 0.0
             e = xy[b] - xy[a]
             da = float(e[0] * (xy[source, 1] - xy[a, 1]) - e[1] * (xy[source, 0] - xy[a, 0]))
@@ -300,10 +302,10 @@ class Triangulation:
         def is_ear(j: int, with_source: bool) -> bool:
             n = len(poly)
             c, a, b = poly[j - 1], poly[j], poly[(j + 1) % n]
-            if a == target or _orient1(xy, c, a, b) <= 0:
+            if a == target or _orient1(self._xyl, c, a, b) <= 0:
                 return False
             if with_source:  # the paper's flip: quad (source, c, a, b) convex
-                return _orient1(xy, source, c, b) > 0
+                return _orient1(self._xyl, source, c, b) > 0
             others = [x for x in poly if x not in (c, a, b)]
             if not others:
                 return True
@@ -320,7 +322,7 @@ class Triangulation:
             blocking = []
             for k in range(n):
                 a, b = poly[k], poly[(k + 1) % n]
-                if target not in (a, b) and _orient1(xy, target, a, b) <= 0:
+                if target not in (a, b) and _orient1(self._xyl, target, a, b) <= 0:
                     blocking.append((cut(a, b), k))
             if not blocking:
                 break
@@ -393,7 +395,7 @@ class Triangulation:
         s, p, q = self.tri[f][k], self.tri[f][(k + 1) % 3], self.tri[f][(k + 2) % 3]
         j = self.nbr[g].index(f)
         r = self.tri[g][j]
-        if _orient1(self.xy, s, p, r) <= 0 or _orient1(self.xy, s, r, q) <= 0:
+        if _orient1(self._xyl, s, p, r) <= 0 or _orient1(self._xyl, s, r, q) <= 0:
             raise ValueError(f"edge ({p}, {q}) is not flippable")
         f_q = self.nbr[f][(k + 2) % 3]  # across (s, p)
         f_p = self.nbr[f][(k + 1) % 3]  # across (q, s)
