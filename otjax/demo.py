@@ -17,7 +17,7 @@ import numpy as np
 
 def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("-n", "--points", type=int, default=800)
+    parser.add_argument("-n", "--points", type=int, default=500)
     parser.add_argument("--vertices", type=int, default=10)
     parser.add_argument("--noise", type=float, default=0.01)
     parser.add_argument("--seed", type=int, default=0)
@@ -56,7 +56,7 @@ def main(argv=None) -> None:
     ax.scatter(*tri.xy[kept].T, c="C3", s=20, zorder=3, label="vertices")
     ax.set_aspect("equal")
     ax.set_title(f"otjax: {len(pts)} noisy points -> {len(kept)} vertices")
-    ax.legend(loc="lower right")
+    ax.legend(loc="center", fontsize=8)
     os.makedirs(os.path.dirname(args.output) or ".", exist_ok=True)
     tmp = args.output + ".tmp.png"
     fig.savefig(tmp, dpi=100)

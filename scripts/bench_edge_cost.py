@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import platform
 import time
 
@@ -27,10 +28,10 @@ import jax
 
 jax.config.update("jax_enable_x64", True)  # script-local: float64 runs need it
 
-import numpy as np  # noqa: E402
+import numpy as np
 
-from otjax.curves import cost  # noqa: E402
-from otjax.stencil import Buckets, EdgeStencil, pack_edge_stencils  # noqa: E402
+from otjax.curves import cost
+from otjax.stencil import Buckets, EdgeStencil, pack_edge_stencils
 
 
 def random_stencil(rng: np.random.Generator, n_edges: int, n_points: int):
@@ -51,7 +52,9 @@ def random_stencil(rng: np.random.Generator, n_edges: int, n_points: int):
     host = rng.integers(0, n_edges, n_points)
     s = rng.uniform(-0.1, 1.1, n_points)[:, None]
     points = edges[host, 0] + s * (edges[host, 1] - edges[host, 0]) + rng.normal(0, 0.05, (n_points, 2))
-    cand = np.sort(np.stack([host, rng.integers(0, n_edges, n_points), rng.integers(0, n_edges, n_points)], 1), 1)
+    cand = np.sort(
+        np.stack([host, rng.integers(0, n_edges, n_points), rng.integers(0, n_edges, n_points)], 1), 1
+    )
     mass = rng.uniform(0.5, 1.5, n_points)
     return edges, points, mass, cand.astype(np.int32)
 
@@ -72,7 +75,7 @@ def _np_segment_sqdist(p, a, b):
 
 def numpy_batched_cost(s: EdgeStencil) -> dict:
     """Per-edge costs of a padded batch with NumPy; same conventions as JAX."""
-    n_b, n_e, n_p = s.shape
+    n_b, n_e, _ = s.shape
     rows = np.arange(n_b)[:, None]
     seg = s.edges[rows[..., None], s.cand]  # (B, P, 3, 2, 2)
     d2 = _np_segment_sqdist(s.points[:, :, None], seg[..., 0, :], seg[..., 1, :])
@@ -112,7 +115,8 @@ def numpy_batched_cost(s: EdgeStencil) -> dict:
 
     edge_len = np.linalg.norm(s.edges[:, :, 1] - s.edges[:, :, 0], axis=-1).ravel()
     em = s.edge_mask.ravel()
-    out = {k: v[:-1] for k, v in dict(edge_mass=edge_mass, normal=normal, tangential=tangential, vertex=vertex).items()}
+    sums = {"edge_mass": edge_mass, "normal": normal, "tangential": tangential, "vertex": vertex}
+    out = {k: v[:-1] for k, v in sums.items()}
     solid = (out["normal"] + out["tangential"] < out["vertex"]) & (out["edge_mass"] > 0) & (edge_len > 0) & em
     edge_cost = np.where(em, np.where(solid, out["normal"] + out["tangential"], out["vertex"]), 0)
     out = {k: v.reshape(n_b, n_e) for k, v in out.items()}
@@ -147,26 +151,34 @@ def bench(sizes, batches, repeat, seed, edges_per_stencil):
                 dev = jax.device_put(host)
                 ref = numpy_batched_cost(host)
                 timings = {}
-                for name, fn in (("jax-sort", cost.batched_stencil_cost_sort), ("jax-rank", cost.batched_stencil_cost_rank)):
+                for name, fn in (
+                    ("jax-sort", cost.batched_stencil_cost_sort),
+                    ("jax-rank", cost.batched_stencil_cost_rank),
+                ):
                     got = fn(dev)
                     rtol = 1e-9 if dtype == np.float64 else 1e-3
                     np.testing.assert_allclose(np.asarray(got.total), ref["total"], rtol=rtol)
-                    timings[name] = _median_seconds(lambda fn=fn: fn(dev).total.block_until_ready(), repeat)
-                timings["numpy"] = _median_seconds(lambda: numpy_batched_cost(host), repeat)
+                    timings[name] = _median_seconds(
+                        lambda fn=fn, dev=dev: fn(dev).total.block_until_ready(), repeat
+                    )
+                timings["numpy"] = _median_seconds(lambda host=host: numpy_batched_cost(host), repeat)
                 shape = host.shape
                 for name, sec in timings.items():
                     rows.append(
-                        dict(
-                            impl=name,
-                            dtype=np.dtype(dtype).name,
-                            B=shape[0],
-                            E=shape[1],
-                            P=shape[2],
-                            us_per_call=sec * 1e6,
-                            ns_per_point=sec * 1e9 / (shape[0] * shape[2]),
-                        )
+                        {
+                            "impl": name,
+                            "dtype": np.dtype(dtype).name,
+                            "B": shape[0],
+                            "E": shape[1],
+                            "P": shape[2],
+                            "us_per_call": sec * 1e6,
+                            "ns_per_point": sec * 1e9 / (shape[0] * shape[2]),
+                        }
                     )
-                    print(f"{rows[-1]['dtype']} B={shape[0]} E={shape[1]} P={shape[2]} {name}: {sec * 1e6:.1f} us", flush=True)
+                    print(
+                        f"{rows[-1]['dtype']} B={shape[0]} E={shape[1]} P={shape[2]} {name}: {sec * 1e6:.1f} us",
+                        flush=True,
+                    )
     return rows
 
 
@@ -174,7 +186,9 @@ def markdown(rows) -> str:
     impls = ["jax-sort", "jax-rank", "numpy"]
     head = "| dtype | B | E | P | " + " | ".join(f"{i} ns/pt (us/call)" for i in impls) + " | fastest |"
     lines = [head, "|" + "---|" * (5 + len(impls))]
-    keys = sorted({(r["dtype"], r["B"], r["E"], r["P"]) for r in rows}, key=lambda k: (k[0] != "float64", k[1], k[3]))
+    keys = sorted(
+        {(r["dtype"], r["B"], r["E"], r["P"]) for r in rows}, key=lambda k: (k[0] != "float64", k[1], k[3])
+    )
     for k in keys:
         by = {r["impl"]: r for r in rows if (r["dtype"], r["B"], r["E"], r["P"]) == k}
         cells = [f"{by[i]['ns_per_point']:.1f} ({by[i]['us_per_call']:.0f})" for i in impls]
@@ -197,15 +211,15 @@ def main(argv=None):
     print()
     print(table)
     if args.json:
-        meta = dict(
-            jax=jax.__version__,
-            devices=[str(d) for d in jax.devices()],
-            machine=platform.machine(),
-            processor=platform.processor(),
-            args=vars(args),
-        )
+        meta = {
+            "jax": jax.__version__,
+            "devices": [str(d) for d in jax.devices()],
+            "machine": platform.machine(),
+            "cpu_count": os.cpu_count(),
+            "args": vars(args),
+        }
         with open(args.json, "w") as f:
-            json.dump(dict(meta=meta, rows=rows, table=table), f, indent=1)
+            json.dump({"meta": meta, "rows": rows, "table": table}, f, indent=1)
 
 
 if __name__ == "__main__":

@@ -10,15 +10,19 @@ import math
 
 
 def oracle_segment_sqdist(p, a, b) -> float:
-    """Squared distance from point ``p`` to segment ``[a, b]`` (2-sequences)."""
+    """Squared distance from point ``p`` to segment ``[a, b]`` (2-sequences).
+
+    Endpoint regions are decided by signs of dot products and the interior
+    distance is ``cross^2 / |b - a|^2``: the rounding convention the kernels
+    share, so that exact ties (lattice data) are ties here too.
+    """
     dx, dy = b[0] - a[0], b[1] - a[1]
-    den = dx * dx + dy * dy
-    t = ((p[0] - a[0]) * dx + (p[1] - a[1]) * dy) / den if den != 0 else 0.0
-    if t <= 0:
+    if (p[0] - a[0]) * dx + (p[1] - a[1]) * dy <= 0:
         return (p[0] - a[0]) ** 2 + (p[1] - a[1]) ** 2
-    if t >= 1:
+    if (p[0] - b[0]) * dx + (p[1] - b[1]) * dy >= 0:
         return (p[0] - b[0]) ** 2 + (p[1] - b[1]) ** 2
-    return (p[0] - (a[0] + t * dx)) ** 2 + (p[1] - (a[1] + t * dy)) ** 2
+    cross = dx * (p[1] - a[1]) - dy * (p[0] - a[0])
+    return cross**2 / (dx * dx + dy * dy)
 
 
 def oracle_edge_cost(a, b, pts, masses) -> tuple[float, float, float]:

@@ -24,8 +24,14 @@ PER_EDGE = ("edge_cost", "normal", "tangential", "vertex", "edge_mass")
 
 
 # Both formulations in ONE compiled function, so each padded shape compiles
-# once; every test below reuses a handful of shapes.
-@jax.jit
+# once and every test below reuses a handful of shapes. Compiled at XLA
+# backend optimisation level 0: about half the compile time, which dominates
+# this file; the rounding may differ from the production build only in the
+# last bits, and test_public_batched_functions checks the production build.
+FAST_COMPILE = {"xla_backend_optimization_level": 0}
+
+
+@functools.partial(jax.jit, compiler_options=FAST_COMPILE)
 def both_methods(batch: EdgeStencil) -> dict:
     return {m: jax.vmap(functools.partial(cost.stencil_cost, tangential_method=m))(batch) for m in METHODS}
 
@@ -157,7 +163,9 @@ def test_public_batched_functions():
     batch = pack_edge_stencils([make_stencil(rng, 16, 32) for _ in range(3)], Buckets(16, 32))
     got = jax.tree.map(np.asarray, cost.batched_stencil_cost(batch))
     want = run_both(batch)[cost.DEFAULT_TANGENTIAL_METHOD]
-    for key in PER_EDGE + ("total", "solid", "assignment"):
+    for key in PER_EDGE + ("total",):
+        np.testing.assert_allclose(getattr(got, key), getattr(want, key), rtol=1e-12, atol=1e-15)
+    for key in ("solid", "assignment"):
         np.testing.assert_array_equal(getattr(got, key), getattr(want, key))
     with pytest.raises(ValueError):
         cost.stencil_cost(row(batch, 0), "bogus")
@@ -284,7 +292,7 @@ def _total(edges, points, mass, batch, method):
     return jnp.sum(jax.vmap(functools.partial(cost.stencil_cost, tangential_method=method))(s).total)
 
 
-@jax.jit
+@functools.partial(jax.jit, compiler_options=FAST_COMPILE)
 def grads_both(batch: EdgeStencil) -> dict:
     return {
         m: jax.grad(_total, argnums=(0, 1, 2))(batch.edges, batch.points, batch.mass, batch, m) for m in METHODS

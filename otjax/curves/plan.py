@@ -57,16 +57,18 @@ class CandidateStencil(NamedTuple):
 def segment_sqdist_np(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Squared point-segment distance with the kernel's exact tie rule.
 
-    Shapes broadcast over ``(..., 2)``. A point in the vertex region of an
-    endpoint gets ``|p - endpoint|**2`` computed from the endpoint alone, so
-    edges sharing that endpoint tie exactly.
+    NumPy twin of :func:`otjax.curves.cost.segment_sqdist` (same branch tests
+    on signs, same interior formula), for host-side assignments. Shapes
+    broadcast over ``(..., 2)``.
     """
-    ab = b - a
-    den = np.sum(ab * ab, -1)
-    t = np.where(den > 0, np.sum((p - a) * ab, -1) / np.where(den > 0, den, 1.0), 0.0)
-    q = a + t[..., None] * ab
-    dq = np.sum((p - q) ** 2, -1)
-    return np.where(t <= 0, np.sum((p - a) ** 2, -1), np.where(t >= 1, np.sum((p - b) ** 2, -1), dq))
+    d = b - a
+    pa, pb = p - a, p - b
+    along = np.sum(pa * d, -1)
+    den = np.sum(d * d, -1)
+    cross = d[..., 0] * pa[..., 1] - d[..., 1] * pa[..., 0]
+    interior = np.divide(cross**2, den, out=np.zeros_like(cross), where=den > 0)
+    return np.where(along <= 0, np.sum(pa * pa, -1),
+                    np.where(np.sum(pb * d, -1) >= 0, np.sum(pb * pb, -1), interior))
 
 
 class TransportPlan:
@@ -186,9 +188,23 @@ class TransportPlan:
             return None
         tri, xy = self.tri, self.tri.xy
         new = np.asarray(plan.new_triangles, np.int64)  # (T, 3)
-        tkeys = np.stack([np.sort(new[:, [k, (k + 1) % 3]], 1) for k in range(3)], 1)  # (T, 3, 2)
-        keys, inv = np.unique(tkeys.reshape(-1, 2), axis=0, return_inverse=True)
-        tcand = np.sort(inv.reshape(-1, 3), 1).astype(np.int32)  # sorted local = sorted key
+        local: dict[tuple[int, int], int] = {}
+        tedges = []
+        for t in plan.new_triangles:
+            row = []
+            for k in range(3):
+                u, w = t[k], t[(k + 1) % 3]
+                row.append(local.setdefault((u, w) if u < w else (w, u), len(local)))
+            tedges.append(row)
+        # Local edge indices in increasing key order: ties then go to the
+        # smaller key, as in the from-scratch rule.
+        keys = np.array(sorted(local), np.int64)
+        rank = {k: i for i, k in enumerate(map(tuple, keys.tolist()))}
+        remap = np.empty(len(local), np.int32)
+        for k, i in local.items():
+            remap[i] = rank[k]
+        local = rank
+        tcand = np.sort(remap[np.asarray(tedges)], 1).astype(np.int32)
 
         inside = np.concatenate([self.face_pts[f] for f in plan.star])
         if len(inside):
@@ -200,7 +216,6 @@ class TransportPlan:
             t_of_p = np.zeros(0, np.int64)
 
         ring, n = plan.ring, len(plan.ring)
-        local = {(int(a), int(b)): i for i, (a, b) in enumerate(keys)}
         outside_ids, outside_cand = [], []
         before = 0.0
         for k in range(n):
