@@ -103,10 +103,12 @@ def numpy_batched_cost(s: EdgeStencil) -> dict:
     # then cumsum minus the cumsum at the group start.
     order = np.lexsort((t, group))
     m_s, g_s = m[order], group[order]
-    excl = np.cumsum(m_s) - m_s
+    # float64 accumulation: a global float32 cumsum over B * P points would
+    # lose the small per-group sums to cancellation.
+    excl = np.cumsum(m_s, dtype=np.float64) - m_s
     start = np.r_[True, g_s[1:] != g_s[:-1]]
     before_s = excl - np.maximum.accumulate(np.where(start, excl, 0))
-    before = np.empty_like(before_s)
+    before = np.empty_like(m)
     before[order] = before_s
 
     scale = np.divide(length, edge_mass[group], out=np.zeros_like(length), where=edge_mass[group] != 0)
@@ -126,6 +128,19 @@ def numpy_batched_cost(s: EdgeStencil) -> dict:
 
 
 # ----------------------------------------------------------------------------
+
+
+def _check(got: np.ndarray, want: np.ndarray, dtype) -> None:
+    """Sanity check against NumPy before timing anything.
+
+    float64 must agree to 1e-9. In float32 a near-tie may flip one point's
+    assignment (a genuine discontinuity), so only a few stencils may be off.
+    """
+    if dtype == np.float64:
+        np.testing.assert_allclose(got, want, rtol=1e-9, atol=1e-12 * np.abs(want).max())
+        return
+    off = np.abs(got - want) > 1e-3 * np.abs(want) + 1e-6
+    assert off.mean() <= 0.01, f"{off.sum()} of {off.size} float32 stencils disagree with NumPy"
 
 
 def _median_seconds(fn, repeat: int) -> float:
@@ -155,9 +170,7 @@ def bench(sizes, batches, repeat, seed, edges_per_stencil):
                     ("jax-sort", cost.batched_stencil_cost_sort),
                     ("jax-rank", cost.batched_stencil_cost_rank),
                 ):
-                    got = fn(dev)
-                    rtol = 1e-9 if dtype == np.float64 else 1e-3
-                    np.testing.assert_allclose(np.asarray(got.total), ref["total"], rtol=rtol)
+                    _check(np.asarray(fn(dev).total), ref["total"], dtype)
                     timings[name] = _median_seconds(
                         lambda fn=fn, dev=dev: fn(dev).total.block_until_ready(), repeat
                     )

@@ -28,7 +28,10 @@ import numpy as np
 from otjax.stencil import EdgeStencil
 
 TANGENTIAL_METHODS = ("rank", "sort")
-DEFAULT_TANGENTIAL_METHOD = "rank"
+# "sort" by measurement (scripts/bench_edge_cost.py, XLA:CPU): on par with
+# "rank" up to 64 points per stencil and 2-4x faster at 128, where the O(P^2)
+# rank matrix takes over. "rank" may still pay off on accelerators.
+DEFAULT_TANGENTIAL_METHOD = "sort"
 
 
 class StencilCost(NamedTuple):
@@ -120,6 +123,32 @@ def segment_sqdist(p: jax.Array, a: jax.Array, b: jax.Array) -> jax.Array:
     return jnp.where(along <= 0, _dot(pa, pa), jnp.where(_dot(pb, d) >= 0, _dot(pb, pb), interior))
 
 
+def _nearest_candidate(stencil: EdgeStencil) -> tuple[jax.Array, jax.Array]:
+    """Nearest candidate edge of each point, and that edge's endpoints.
+
+    Returns:
+      ``(assignment (P,) int32, endpoints (P, 2, 2))``; see :func:`assign_points`.
+      Padded points get ``-1`` and the endpoints of their first candidate.
+    """
+    cand = jnp.asarray(stencil.cand)
+    # mode="clip": cand is in range by contract, and the clipped gather is
+    # several times faster on XLA:CPU than the default bounds-filling one.
+    seg = jnp.take(jnp.asarray(stencil.edges), cand, axis=0, mode="clip")  # (P, 3, 2, 2)
+    d2 = segment_sqdist(jnp.asarray(stencil.points)[:, None, :], seg[..., 0, :], seg[..., 1, :])
+    # First occurrence on exact ties (argmin semantics), written as selects
+    # over the three candidates: no further gathers, which cost XLA:CPU both
+    # compile and run time.
+    pick1 = d2[:, 1] < d2[:, 0]
+    best = jnp.where(pick1, d2[:, 1], d2[:, 0])
+    pick2 = d2[:, 2] < best
+    picked = jnp.where(pick2, cand[:, 2], jnp.where(pick1, cand[:, 1], cand[:, 0]))
+    endpoints = jnp.where(
+        pick2[:, None, None], seg[:, 2], jnp.where(pick1[:, None, None], seg[:, 1], seg[:, 0])
+    )
+    assignment = jnp.where(jnp.asarray(stencil.point_mask), picked, -1).astype(jnp.int32)
+    return assignment, endpoints
+
+
 def assign_points(stencil: EdgeStencil) -> jax.Array:
     """Assigns each point to the nearest of its candidate edges.
 
@@ -131,14 +160,7 @@ def assign_points(stencil: EdgeStencil) -> jax.Array:
       ``(P,)`` int32 local edge index per point; exact ties go to the earliest
       ``cand`` entry. ``-1`` for padded points.
     """
-    cand = jnp.asarray(stencil.cand)
-    # mode="clip": cand is in range by contract, and the clipped gather is
-    # several times faster on XLA:CPU than the default bounds-filling one.
-    seg = jnp.take(jnp.asarray(stencil.edges), cand, axis=0, mode="clip")  # (P, 3, 2, 2)
-    d2 = segment_sqdist(jnp.asarray(stencil.points)[:, None, :], seg[..., 0, :], seg[..., 1, :])
-    k = jnp.argmin(d2, axis=1)  # first occurrence on ties
-    picked = jnp.take_along_axis(cand, k[:, None], axis=1)[:, 0]
-    return jnp.where(jnp.asarray(stencil.point_mask), picked, -1).astype(jnp.int32)
+    return _nearest_candidate(stencil)[0]
 
 
 def mass_before_rank(edge: jax.Array, t: jax.Array, m: jax.Array, num_bins: int | None = None) -> jax.Array:
@@ -208,6 +230,22 @@ def _float_order_key(t: jax.Array) -> jax.Array:
     return jnp.where(bits < 0, bits ^ jnp.iinfo(int_type).max, bits)
 
 
+def _sort_by_edge_then_t(edge: jax.Array, t: jax.Array, num_bins: int) -> tuple[jax.Array, jax.Array]:
+    """``(order, edge[order])`` for the order of :func:`sort_order`."""
+    n = t.shape[0]
+    key_t = _float_order_key(t)
+    rank_t = jnp.searchsorted(jnp.sort(key_t), key_t, side="left")
+    if num_bins * n * n <= np.iinfo(np.int32).max:
+        key_type = jnp.int32
+    elif jax.config.jax_enable_x64:
+        key_type = jnp.int64
+    else:
+        raise ValueError(f"{num_bins} bins x {n}^2 points overflow int32 keys; enable x64")
+    idx = jnp.arange(n, dtype=key_type)
+    key = jnp.sort((edge.astype(key_type) * n + rank_t.astype(key_type)) * n + idx)
+    return (key % n).astype(jnp.int32), (key // (n * n)).astype(edge.dtype)
+
+
 def sort_order(edge: jax.Array, t: jax.Array, num_bins: int) -> jax.Array:
     """Permutation sorting points by ``(edge, t, index)``; same as a lexsort.
 
@@ -225,18 +263,7 @@ def sort_order(edge: jax.Array, t: jax.Array, num_bins: int) -> jax.Array:
     Returns:
       ``(P,)`` int32 permutation.
     """
-    n = t.shape[0]
-    key_t = _float_order_key(t)
-    rank_t = jnp.searchsorted(jnp.sort(key_t), key_t, side="left")
-    if num_bins * n * n <= np.iinfo(np.int32).max:
-        key_type = jnp.int32
-    elif jax.config.jax_enable_x64:
-        key_type = jnp.int64
-    else:
-        raise ValueError(f"{num_bins} bins x {n}^2 points overflow int32 keys; enable x64")
-    idx = jnp.arange(n, dtype=key_type)
-    key = (edge.astype(key_type) * n + rank_t.astype(key_type)) * n + idx
-    return (jnp.sort(key) % n).astype(jnp.int32)
+    return _sort_by_edge_then_t(edge, t, num_bins)[0]
 
 
 def mass_before_sort(edge: jax.Array, t: jax.Array, m: jax.Array, num_bins: int | None = None) -> jax.Array:
@@ -255,8 +282,8 @@ def mass_before_sort(edge: jax.Array, t: jax.Array, m: jax.Array, num_bins: int 
     Returns:
       ``(P,)`` ``C_i = sum_j m_j [edge_j == edge_i] [j precedes i]``.
     """
-    order = sort_order(edge, t, t.shape[0] if num_bins is None else num_bins)
-    before = _segmented_exclusive_cumsum(edge[order], m[order])
+    order, edge_sorted = _sort_by_edge_then_t(edge, t, t.shape[0] if num_bins is None else num_bins)
+    before = _segmented_exclusive_cumsum(edge_sorted, m[order])
     return jnp.zeros_like(m).at[order].set(before, unique_indices=True)
 
 
@@ -300,7 +327,7 @@ def stencil_cost(stencil: EdgeStencil, tangential_method: str = DEFAULT_TANGENTI
     m = jnp.where(point_mask, jnp.asarray(stencil.mass), 0)
     n_edges = edges.shape[0]
 
-    assignment = assign_points(stencil)
+    assignment, seg = _nearest_candidate(stencil)
     # Padded points go to an extra bin E that is dropped.
     bin_of = jnp.where(point_mask, assignment, n_edges)
 
@@ -310,7 +337,6 @@ def stencil_cost(stencil: EdgeStencil, tangential_method: str = DEFAULT_TANGENTI
         return jax.ops.segment_sum(x, bin_of, num_segments=n_edges + 1)[:n_edges]
 
     # Per-point geometry in the frame of the assigned edge.
-    seg = jnp.take(edges, jnp.maximum(assignment, 0), axis=0, mode="clip")  # (P, 2, 2)
     a, b = seg[:, 0], seg[:, 1]
     d = b - a
     length = _safe_norm(d)

@@ -157,7 +157,7 @@ class TransportPlan:
         """Computes the cost of every edge that holds points, in batches."""
         keys = self.pt_edge[:, 0] * len(self.tri.xy) + self.pt_edge[:, 1]
         order = np.argsort(keys, kind="stable")
-        uniq, starts = np.unique(keys[order], return_index=True)
+        _uniq, starts = np.unique(keys[order], return_index=True)
         groups = np.split(order, starts[1:])
         xy = self.tri.xy
         chunk = self.buckets.max_batch
