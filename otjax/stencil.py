@@ -83,7 +83,7 @@ class Buckets:
         number of compilations of a kernel driven by these buckets.
     """
 
-    def __init__(self, min_edges: int = 16, min_points: int = 32, batch_sizes: tuple[int, ...] = (128, 512)):
+    def __init__(self, min_edges: int = 16, min_points: int = 32, batch_sizes: tuple[int, ...] = (128,)):
         for name, v in (("min_edges", min_edges), ("min_points", min_points)):
             if v < 1 or v & (v - 1):
                 raise ValueError(f"{name} must be a positive power of two, got {v}")
