@@ -160,23 +160,21 @@ def test_matches_oracle_at_bucket_sizes(bucket_case):
 
 
 def test_public_batched_functions():
-    assert cost.DEFAULT_TANGENTIAL_METHOD in METHODS
-    assert (
-        cost.batched_stencil_cost
-        is {"rank": cost.batched_stencil_cost_rank, "sort": cost.batched_stencil_cost_sort}[
-            cost.DEFAULT_TANGENTIAL_METHOD
-        ]
-    )
+    assert cost.resolve_tangential_method("auto", cost.RANK_MAX_POINTS) == "rank"
+    assert cost.resolve_tangential_method("auto", 2 * cost.RANK_MAX_POINTS) == "sort"
+    assert cost.resolve_tangential_method("sort", 8) == "sort"
+    with pytest.raises(ValueError):
+        cost.resolve_tangential_method("bogus", 8)
+    # The production build (default optimisation, default method) agrees with
+    # the test build.
     rng = np.random.default_rng(5)
     batch = pack_edge_stencils([make_stencil(rng, 16, 32) for _ in range(3)], Buckets(16, 32))
     got = jax.tree.map(np.asarray, cost.batched_stencil_cost(batch))
-    want = run_both(batch)[cost.DEFAULT_TANGENTIAL_METHOD]
+    want = run_both(batch)[cost.resolve_tangential_method(cost.DEFAULT_TANGENTIAL_METHOD, 32)]
     for key in PER_EDGE + ("total",):
         np.testing.assert_allclose(getattr(got, key), getattr(want, key), rtol=1e-12, atol=1e-15)
     for key in ("solid", "assignment"):
         np.testing.assert_array_equal(getattr(got, key), getattr(want, key))
-    with pytest.raises(ValueError):
-        cost.stencil_cost(row(batch, 0), "bogus")
 
 
 def test_float32_runs_and_roughly_matches():

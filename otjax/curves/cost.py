@@ -28,10 +28,23 @@ import numpy as np
 from otjax.stencil import EdgeStencil
 
 TANGENTIAL_METHODS = ("rank", "sort")
-# "sort" by measurement (scripts/bench_edge_cost.py, XLA:CPU): on par with
-# "rank" up to 64 points per stencil and 2-4x faster at 128, where the O(P^2)
-# rank matrix takes over. "rank" may still pay off on accelerators.
-DEFAULT_TANGENTIAL_METHOD = "sort"
+# Measured on XLA:CPU (scripts/bench_edge_cost.py): the O(P^2) "rank" is up to
+# ~1.5x faster for P <= 32 points per stencil, on par at 64 (in cache), and
+# 3x slower at 128, growing with P; "sort" stays near 200 ns per point. The
+# default "auto" takes the faster one for the (static) padded P.
+RANK_MAX_POINTS = 32
+DEFAULT_TANGENTIAL_METHOD = "auto"
+
+
+def resolve_tangential_method(tangential_method: str, n_points: int) -> str:
+    """``"rank"`` or ``"sort"``: ``"auto"`` resolved for ``n_points`` (padded P)."""
+    if tangential_method == "auto":
+        return "rank" if n_points <= RANK_MAX_POINTS else "sort"
+    if tangential_method not in TANGENTIAL_METHODS:
+        raise ValueError(
+            f"tangential_method must be 'auto' or one of {TANGENTIAL_METHODS}, got {tangential_method!r}"
+        )
+    return tangential_method
 
 
 class StencilCost(NamedTuple):
@@ -128,24 +141,19 @@ def _nearest_candidate(stencil: EdgeStencil) -> tuple[jax.Array, jax.Array]:
 
     Returns:
       ``(assignment (P,) int32, endpoints (P, 2, 2))``; see :func:`assign_points`.
-      Padded points get ``-1`` and the endpoints of their first candidate.
+      Padded points get ``-1`` (and endpoints that nothing uses).
     """
     cand = jnp.asarray(stencil.cand)
     # mode="clip": cand is in range by contract, and the clipped gather is
     # several times faster on XLA:CPU than the default bounds-filling one.
     seg = jnp.take(jnp.asarray(stencil.edges), cand, axis=0, mode="clip")  # (P, 3, 2, 2)
     d2 = segment_sqdist(jnp.asarray(stencil.points)[:, None, :], seg[..., 0, :], seg[..., 1, :])
-    # First occurrence on exact ties (argmin semantics), written as selects
-    # over the three candidates: no further gathers, which cost XLA:CPU both
-    # compile and run time.
-    pick1 = d2[:, 1] < d2[:, 0]
-    best = jnp.where(pick1, d2[:, 1], d2[:, 0])
-    pick2 = d2[:, 2] < best
-    picked = jnp.where(pick2, cand[:, 2], jnp.where(pick1, cand[:, 1], cand[:, 0]))
-    endpoints = jnp.where(
-        pick2[:, None, None], seg[:, 2], jnp.where(pick1[:, None, None], seg[:, 1], seg[:, 0])
-    )
+    k = jnp.argmin(d2, axis=1)  # first occurrence on exact ties
+    picked = jnp.take_along_axis(cand, k[:, None], axis=1)[:, 0]
     assignment = jnp.where(jnp.asarray(stencil.point_mask), picked, -1).astype(jnp.int32)
+    # A second gather from edges, not a select among the three candidates:
+    # the select compiles slower and runs ~3x slower on XLA:CPU (measured).
+    endpoints = jnp.take(jnp.asarray(stencil.edges), picked, axis=0, mode="clip")
     return assignment, endpoints
 
 
@@ -230,22 +238,6 @@ def _float_order_key(t: jax.Array) -> jax.Array:
     return jnp.where(bits < 0, bits ^ jnp.iinfo(int_type).max, bits)
 
 
-def _sort_by_edge_then_t(edge: jax.Array, t: jax.Array, num_bins: int) -> tuple[jax.Array, jax.Array]:
-    """``(order, edge[order])`` for the order of :func:`sort_order`."""
-    n = t.shape[0]
-    key_t = _float_order_key(t)
-    rank_t = jnp.searchsorted(jnp.sort(key_t), key_t, side="left")
-    if num_bins * n * n <= np.iinfo(np.int32).max:
-        key_type = jnp.int32
-    elif jax.config.jax_enable_x64:
-        key_type = jnp.int64
-    else:
-        raise ValueError(f"{num_bins} bins x {n}^2 points overflow int32 keys; enable x64")
-    idx = jnp.arange(n, dtype=key_type)
-    key = jnp.sort((edge.astype(key_type) * n + rank_t.astype(key_type)) * n + idx)
-    return (key % n).astype(jnp.int32), (key // (n * n)).astype(edge.dtype)
-
-
 def sort_order(edge: jax.Array, t: jax.Array, num_bins: int) -> jax.Array:
     """Permutation sorting points by ``(edge, t, index)``; same as a lexsort.
 
@@ -263,7 +255,18 @@ def sort_order(edge: jax.Array, t: jax.Array, num_bins: int) -> jax.Array:
     Returns:
       ``(P,)`` int32 permutation.
     """
-    return _sort_by_edge_then_t(edge, t, num_bins)[0]
+    n = t.shape[0]
+    key_t = _float_order_key(t)
+    rank_t = jnp.searchsorted(jnp.sort(key_t), key_t, side="left")
+    if num_bins * n * n <= np.iinfo(np.int32).max:
+        key_type = jnp.int32
+    elif jax.config.jax_enable_x64:
+        key_type = jnp.int64
+    else:
+        raise ValueError(f"{num_bins} bins x {n}^2 points overflow int32 keys; enable x64")
+    idx = jnp.arange(n, dtype=key_type)
+    key = (edge.astype(key_type) * n + rank_t.astype(key_type)) * n + idx
+    return (jnp.sort(key) % n).astype(jnp.int32)
 
 
 def mass_before_sort(edge: jax.Array, t: jax.Array, m: jax.Array, num_bins: int | None = None) -> jax.Array:
@@ -282,8 +285,8 @@ def mass_before_sort(edge: jax.Array, t: jax.Array, m: jax.Array, num_bins: int 
     Returns:
       ``(P,)`` ``C_i = sum_j m_j [edge_j == edge_i] [j precedes i]``.
     """
-    order, edge_sorted = _sort_by_edge_then_t(edge, t, t.shape[0] if num_bins is None else num_bins)
-    before = _segmented_exclusive_cumsum(edge_sorted, m[order])
+    order = sort_order(edge, t, t.shape[0] if num_bins is None else num_bins)
+    before = _segmented_exclusive_cumsum(edge[order], m[order])
     return jnp.zeros_like(m).at[order].set(before, unique_indices=True)
 
 
@@ -312,14 +315,14 @@ def stencil_cost(stencil: EdgeStencil, tangential_method: str = DEFAULT_TANGENTI
         ``edge_mask (E,)``, ``points (P, 2)``, ``mass (P,)``,
         ``point_mask (P,)``, ``cand (P, 3)``.
       tangential_method: how ``C_i`` is found: ``"rank"`` (``(P, P)``
-        comparisons) or ``"sort"`` (integer-key sort and segmented scan).
-        Same result up to rounding; see :data:`DEFAULT_TANGENTIAL_METHOD`.
+        comparisons), ``"sort"`` (integer-key sort and segmented scan), or
+        ``"auto"`` (the faster for this ``P``, see
+        :func:`resolve_tangential_method`). Same result up to rounding.
 
     Returns:
       A :class:`StencilCost`.
     """
-    if tangential_method not in _MASS_BEFORE:
-        raise ValueError(f"tangential_method must be one of {TANGENTIAL_METHODS}, got {tangential_method!r}")
+    method = resolve_tangential_method(tangential_method, jnp.shape(stencil.mass)[0])
     edges = jnp.asarray(stencil.edges)
     edge_mask = jnp.asarray(stencil.edge_mask)
     points = jnp.asarray(stencil.points)
@@ -350,7 +353,7 @@ def stencil_cost(stencil: EdgeStencil, tangential_method: str = DEFAULT_TANGENTI
     sums = per_edge(jnp.stack([m, m * nrm2, m * vtx2], axis=-1))
     edge_mass, normal, vertex = sums[:, 0], sums[:, 1], sums[:, 2]
 
-    mass_before = _MASS_BEFORE[tangential_method](bin_of, t, m, n_edges + 1)
+    mass_before = _MASS_BEFORE[method](bin_of, t, m, n_edges + 1)
     scale = _safe_div(length, jnp.take(edge_mass, jnp.maximum(assignment, 0), mode="clip"))  # L / M_e
     bin_len = scale * m
     centre = scale * (mass_before + 0.5 * m)
@@ -384,8 +387,6 @@ batched_stencil_cost_rank = _batched("rank")
 batched_stencil_cost_sort = _batched("sort")
 """``jit(vmap(stencil_cost))`` with the sort-based tangential part."""
 
-batched_stencil_cost = {"rank": batched_stencil_cost_rank, "sort": batched_stencil_cost_sort}[
-    DEFAULT_TANGENTIAL_METHOD
-]
+batched_stencil_cost = _batched(DEFAULT_TANGENTIAL_METHOD)
 """Batched :func:`stencil_cost` with the default method: ``EdgeStencil`` with
 leading ``B`` axis -> :class:`StencilCost` with leading ``B`` axis."""
