@@ -75,8 +75,9 @@ class Buckets:
     Args:
       min_edges: initial edge capacity (power of two).
       min_points: initial point capacity (power of two).
-      batch_sizes: increasing batch capacities (the small one fits the dirty
-        region of one collapse, the large one bulk scoring).
+      batch_sizes: increasing batch capacities. The default is a single one:
+        every extra capacity multiplies the compiled shapes (measured: 17
+        shapes over 2000 collapses with ``(128, 512)``, 9 with ``(128,)``).
 
     Attributes:
       shapes_seen: every ``(B, E, P)`` handed out so far; its size bounds the
