@@ -23,6 +23,7 @@ a sample size, a noise level and recommended reconstruction parameters.
 
 from __future__ import annotations
 
+import inspect
 from dataclasses import dataclass
 
 import numpy as np
@@ -325,6 +326,50 @@ def _outlier_seed(seed: int) -> int:
     return int(np.random.SeedSequence([seed, 1]).generate_state(1)[0])
 
 
+def generate(name: str, n: int | None = None, noise: float | None = None,
+             n_outliers: int | None = None, seed: int = 0):
+    """Points and truth of a shape or built-in example, its settings overridden where given.
+
+    A shape name (:data:`SHAPES`) defaults to the generator's own ``n``, no
+    noise and no outliers; an example name (:data:`EXAMPLES`) to the example's
+    settings. When only ``n`` is overridden, the outlier count keeps its share.
+
+    Args:
+      name: a key of :data:`SHAPES` or :data:`EXAMPLES`.
+      n: number of shape samples (outliers not counted).
+      noise: noise std as a fraction of the diagonal.
+      n_outliers: number of uniform outliers, appended last (:func:`with_outliers`).
+      seed: seed for sampling, noise and outliers.
+
+    Returns:
+      ``points (N, 2)`` and the truth dict, with the settings used under
+      ``"params"`` (name, shape, n, noise, n_outliers, seed).
+
+    Example:
+      >>> pts, truth = generate("star-outliers", n=100)
+      >>> pts.shape, truth["n_outliers"]
+      ((200, 2), 100)
+    """
+    if name in _EXAMPLES:
+        ex = _EXAMPLES[name]
+        shape, base_n, base_noise, base_outliers = ex.shape, ex.n, ex.noise, ex.n_outliers
+    elif name in SHAPES:
+        shape, base_noise, base_outliers = name, 0.0, 0
+        base_n = inspect.signature(SHAPES[name]).parameters["n"].default
+    else:
+        valid = sorted(set(SHAPES) | set(_EXAMPLES))
+        raise ValueError(f"unknown shape or example {name!r}; valid names: {', '.join(valid)}")
+    count = base_n if n is None else n
+    noise = base_noise if noise is None else noise
+    if n_outliers is None:
+        n_outliers = round(base_outliers * count / base_n)
+    points, truth = SHAPES[shape](count, noise=noise, seed=seed)
+    if n_outliers:
+        points, truth = with_outliers(points, truth, n_outliers, seed=_outlier_seed(seed))
+    params = {"name": name, "shape": shape, "n": count, "noise": noise, "n_outliers": n_outliers, "seed": seed}
+    return points, dict(truth, params=params)
+
+
 def load_example(name: str, seed: int = 0, n: int | None = None):
     """Points, unit masses, ground truth and recommended parameters of a built-in example.
 
@@ -346,11 +391,6 @@ def load_example(name: str, seed: int = 0, n: int | None = None):
     """
     if name not in _EXAMPLES:
         raise ValueError(f"unknown example {name!r}; valid names: {', '.join(_EXAMPLES)}")
+    points, truth = generate(name, n=n, seed=seed)
     ex = _EXAMPLES[name]
-    count = ex.n if n is None else n
-    points, truth = SHAPES[ex.shape](count, noise=ex.noise, seed=seed)
-    if ex.n_outliers:
-        n_outliers = ex.n_outliers if n is None else round(ex.n_outliers * count / ex.n)
-        points, truth = with_outliers(points, truth, n_outliers, seed=_outlier_seed(seed))
-    defaults = {"n_vertices": ex.n_vertices, "relevance": ex.relevance}
-    return points, np.ones(len(points)), truth, defaults
+    return points, np.ones(len(points)), truth, {"n_vertices": ex.n_vertices, "relevance": ex.relevance}

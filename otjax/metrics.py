@@ -195,7 +195,7 @@ def length_within(segs_a, segs_b, tol: float, step: float | None = None) -> floa
       A float in ``[0, 1]``; ``0.0`` when A has no length.
 
     Example:
-      >>> length_within([[[0, 0], [2, 0]]], [[[0, 0.1], [1, 0.1]]], tol=0.2)
+      >>> round(length_within([[[0, 0], [2, 0]]], [[[1, -1], [1, 1]]], tol=0.5), 6)
       0.5
     """
     a = _as_segments(segs_a, "segs_a")
