@@ -135,11 +135,10 @@ def _junctions_truth() -> dict:
     # X and T are 2 apart (41% of D), and no two feature points are closer than 0.9.
     x, t, bend = (0.0, 0.0), (2.0, 0.0), (2.0, 1.0)
     ends = np.array([(-1.2, 0.0), (3.2, 0.0), (-0.7, -1.0), (0.7, 1.0), (2.9, 1.0)])
-    segments = [
-        (ends[0], x), (x, t), (t, ends[1]),  # spine
-        (ends[2], x), (x, ends[3]),  # diagonal through the crossing
-        (t, bend), (bend, ends[4]),  # stem with a right-angle bend
-    ]
+    spine = [(ends[0], x), (x, t), (t, ends[1])]
+    diagonal = [(ends[2], x), (x, ends[3])]
+    stem = [(t, bend), (bend, ends[4])]
+    segments = spine + diagonal + stem
     junctions = np.array([x, t])
     corners = np.concatenate([junctions, ends, [bend]])
     return _truth(np.array(segments), corners, ends, junctions, degree=[4, 3])
@@ -305,14 +304,26 @@ _EXAMPLES = {
     "noisy-star": _Example("five-pointed star, 3000 points, 1% noise", "star", 3000, 0.01, 10),
     # relevance 0.0 is a placeholder until the outlier filter is tuned.
     "star-outliers": _Example(
-        "five-pointed star, 3000 points, 2% noise, plus 3000 uniform outliers", "star", 3000, 0.02, 10, 3000
+        "five-pointed star, 3000 points, 2% noise, plus 3000 uniform outliers",
+        shape="star",
+        n=3000,
+        noise=0.02,
+        n_vertices=10,
+        n_outliers=3000,
     ),
     "skyline": _Example(
         "open city-skyline staircase, 2000 points, 0.5% noise, 12 right-angle corners and 2 ends",
-        "skyline", 2000, 0.005, 14,
+        shape="skyline",
+        n=2000,
+        noise=0.005,
+        n_vertices=14,
     ),
     "junctions": _Example(
-        "open shape with an X-crossing, a T-junction and a bend, 3000 points, clean", "junctions", 3000, 0.0, 8
+        "open shape with an X-crossing, a T-junction and a bend, 3000 points, clean",
+        shape="junctions",
+        n=3000,
+        noise=0.0,
+        n_vertices=8,
     ),
     "circle": _Example("clean unit circle, 2000 points, no corners", "circle", 2000, 0.0, 50),
 }
@@ -326,8 +337,9 @@ def _outlier_seed(seed: int) -> int:
     return int(np.random.SeedSequence([seed, 1]).generate_state(1)[0])
 
 
-def generate(name: str, n: int | None = None, noise: float | None = None,
-             n_outliers: int | None = None, seed: int = 0):
+def generate(
+    name: str, n: int | None = None, noise: float | None = None, n_outliers: int | None = None, seed: int = 0
+):
     """Points and truth of a shape or built-in example, its settings overridden where given.
 
     A shape name (:data:`SHAPES`) defaults to the generator's own ``n``, no
@@ -366,7 +378,14 @@ def generate(name: str, n: int | None = None, noise: float | None = None,
     points, truth = SHAPES[shape](count, noise=noise, seed=seed)
     if n_outliers:
         points, truth = with_outliers(points, truth, n_outliers, seed=_outlier_seed(seed))
-    params = {"name": name, "shape": shape, "n": count, "noise": noise, "n_outliers": n_outliers, "seed": seed}
+    params = {
+        "name": name,
+        "shape": shape,
+        "n": count,
+        "noise": noise,
+        "n_outliers": n_outliers,
+        "seed": seed,
+    }
     return points, dict(truth, params=params)
 
 
