@@ -5,8 +5,9 @@ and ``truth`` a dict that always holds the same keys (empty arrays where a
 feature does not occur), so any consumer can read any shape:
 
 - ``segments (s, 2, 2)``: the clean shape, as straight segments.
-- ``corners (k, 2)``: sharp corners, where the direction changes (for
-  :func:`junctions` also its junctions and free ends, see there).
+- ``corners (k, 2)``: sharp corners, where the direction changes; free ends
+  are not corners (they are in ``ends``), except for :func:`junctions`, whose
+  corners list every vertex of the shape (see there).
 - ``junctions (j, 2)`` and ``junction_degree (j,) int``: points where three
   or more segments meet.
 - ``ends (e, 2)``: free ends of open curves (degree-1 points).
@@ -17,8 +18,10 @@ Gaussian noise of standard deviation ``noise * D``. Generators are
 deterministic for a ``seed`` and draw the noise last, so for a fixed seed the
 noisy points minus the clean ones is exactly the noise.
 
-The built-in examples (:data:`EXAMPLES`, :func:`load_example`) fix a shape,
-a sample size, a noise level and recommended reconstruction parameters.
+:func:`with_outliers` adds ``n_outliers`` and ``outlier_box``, :func:`generate`
+adds ``params``. The built-in examples (:data:`EXAMPLES`, :func:`load_example`)
+fix a shape, a sample size, a noise level, outliers and recommended
+reconstruction parameters.
 """
 
 from __future__ import annotations
@@ -27,6 +30,8 @@ import inspect
 from dataclasses import dataclass
 
 import numpy as np
+
+from otjax.metrics import point_segment_distance
 
 _NO_POINTS = np.zeros((0, 2))
 
@@ -271,8 +276,6 @@ def drawing(size: int = 64, shape: str = "star", line_width: float = 2.0):
       >>> img.shape, float(img.min()), float(img.max())
       ((32, 32), 0.0, 1.0)
     """
-    from otjax.metrics import point_segment_distance
-
     if shape not in _SHAPE_TRUTH:
         raise ValueError(f"unknown shape {shape!r}; valid shapes: {', '.join(sorted(_SHAPE_TRUTH))}")
     if not line_width > 0:
