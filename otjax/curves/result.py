@@ -342,7 +342,7 @@ class CurveResult:
 
             _, ax = plt.subplots(figsize=(6, 6))
         if show_points and self.points is not None and len(self.points):
-            ax.scatter(*self.points.T, s=2, c="0.75", linewidths=0, label="input points")
+            ax.scatter(*self.points.T, s=4, c="0.65", linewidths=0, label="input points")
         if len(self.edges):
             ax.add_collection(
                 LineCollection(self.vertices[self.edges], colors="0.1", linewidths=1.5, label="edges")

@@ -1,0 +1,7 @@
+"""``python -m otjax``: the same as the ``otjax`` command."""
+
+import sys
+
+from otjax.cli import main
+
+sys.exit(main())
