@@ -42,7 +42,10 @@ class CandidateStencil(NamedTuple):
       cand: ``(P, 3)`` local candidate edges per point (see ``EdgeStencil``).
       triangle_of_point: ``(P,)`` index into ``plan.new_triangles`` for points
         of the changed region, ``-1`` for points outside it whose edge is fixed.
-      before: cost of the region's edges before the collapse.
+      before: cost of the region's edges before the change.
+      moved: for a relocation, the new position of ``plan.source`` (then
+        ``plan.target == plan.source`` and the triangles are the star's own);
+        ``None`` for a collapse.
     """
 
     plan: CollapsePlan
@@ -52,6 +55,7 @@ class CandidateStencil(NamedTuple):
     cand: np.ndarray
     triangle_of_point: np.ndarray
     before: float
+    moved: np.ndarray | None = None
 
 
 def segment_sqdist_np(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -90,6 +94,10 @@ class TransportPlan:
         self.buckets = buckets if buckets is not None else Buckets()
         self.dtype = dtype
         self.n_kernel_calls = 0
+        # Collapse plans depend only on the stars of their two ends: cache
+        # them, stamped with per-vertex versions bumped when a star changes.
+        self._star_version = [0] * len(tri.xy)
+        self._plans: dict[tuple[int, int], tuple] = {}
         self.pt_face = self._initial_location()
         self.face_pts: list[np.ndarray] = [np.zeros(0, np.int64)] * len(tri.tri)
         order = np.argsort(self.pt_face, kind="stable")
@@ -178,63 +186,193 @@ class TransportPlan:
         return float(sum(self.edge_cost.values()))
 
     # ------------------------------------------------------------ stencils
+    def _plan(self, source: int, target: int) -> CollapsePlan | None:
+        """Collapse plan, cached until the star of either end changes."""
+        key = (source, target)
+        stamp = (self._star_version[source], self._star_version[target])
+        hit = self._plans.get(key)
+        if hit is not None and hit[0] == stamp:
+            return hit[1]
+        plan = self.tri.plan_collapse(source, target)
+        self._plans[key] = (stamp, plan)
+        return plan
+
+    def _region(self, v: int):
+        """What every change of the star of ``v`` shares (see :meth:`candidates`).
+
+        Returns ``(ring, star, inside, outside, outside_link, before)``: the
+        points in the star; the points of the faces across the link edges that
+        are assigned to those edges, with the link edge index ``k`` (edge
+        ``(ring[k], ring[k+1])``) of each; and the cost of every edge of the
+        star (spokes and link), which is what any change of the star replaces.
+        """
+        tri = self.tri
+        ring, star = tri.star(v)
+        n = len(ring)
+        inside = np.concatenate([self.face_pts[f] for f in star])
+        out_ids, out_link = [], []
+        before = 0.0
+        cost = self.edge_cost
+        for k in range(n):
+            a, b = ring[k], ring[(k + 1) % n]
+            lk = (a, b) if a < b else (b, a)
+            before += cost.get((v, a) if v < a else (a, v), 0.0) + cost.get(lk, 0.0)
+            f = star[k]
+            g = tri.nbr[f][tri.tri[f].index(v)]
+            if g >= 0:
+                ids = self.face_pts[g]
+                if len(ids):
+                    e = self.pt_edge[ids]
+                    sel = ids[(e[:, 0] == lk[0]) & (e[:, 1] == lk[1])]
+                    if len(sel):
+                        out_ids.append(sel)
+                        out_link.append(np.full(len(sel), k, np.int64))
+        outside = np.concatenate(out_ids) if out_ids else np.zeros(0, np.int64)
+        outside_link = np.concatenate(out_link) if out_link else np.zeros(0, np.int64)
+        return ring, star, inside, outside, outside_link, before
+
+    def candidates(self, sources, targets: dict | None = None) -> list[CandidateStencil]:
+        """Exports the collapse stencils of every half-edge leaving ``sources``.
+
+        The work shared by the half-edges of one source (its star, the points
+        around it, the cost being replaced) is done once per source, and the
+        exact point location of all candidates is one vectorised predicate
+        call, because per-call overhead, not arithmetic, dominates at these
+        sizes.
+
+        Args:
+          sources: vertex ids; dead and pinned ones are skipped.
+          targets: optional ``{source: iterable of targets}`` restricting the
+            half-edges (default: every neighbour).
+
+        Returns:
+          Candidates in order of ``sources`` then ring order; half-edges that
+          cannot be collapsed are left out.
+        """
+        tri = self.tri
+        jobs = []
+        for v in sources:
+            if not tri.alive[v] or tri.pinned[v]:
+                continue
+            region = self._region(v)
+            ring = region[0]
+            wanted = ring if targets is None else [w for w in ring if w in set(targets[v])]
+            for w in wanted:
+                plan = self._plan(v, w)
+                if plan is not None:
+                    jobs.append((plan, np.asarray(plan.new_triangles, np.int64), region, None))
+        return self._export(jobs)
+
     def candidate(self, source: int, target: int) -> CandidateStencil | None:
         """Exports the stencil of collapsing ``source`` onto ``target``.
 
         Returns ``None`` when the half-edge cannot be made collapsible.
         """
-        plan = self.tri.plan_collapse(source, target)
-        if plan is None:
+        out = self.candidates([source], {source: [target]})
+        return out[0] if out else None
+
+    def relocation_candidate(self, v: int, position) -> CandidateStencil | None:
+        """Exports the stencil of moving vertex ``v`` to ``position``.
+
+        Returns ``None`` unless ``position`` lies strictly inside the kernel of
+        the one-ring of ``v`` (the only moves that keep the embedding).
+        """
+        tri = self.tri
+        position = np.asarray(position, np.float64)
+        region = self._region(v)
+        ring, star = region[0], region[1]
+        if not tri.in_kernel_at(ring, position):
             return None
-        tri, xy = self.tri, self.tri.xy
-        new = np.asarray(plan.new_triangles, np.int64)  # (T, 3)
-        local: dict[tuple[int, int], int] = {}
-        tedges = []
-        for t in plan.new_triangles:
-            row = []
-            for k in range(3):
-                u, w = t[k], t[(k + 1) % 3]
-                row.append(local.setdefault((u, w) if u < w else (w, u), len(local)))
-            tedges.append(row)
-        # Local edge indices in increasing key order: ties then go to the
-        # smaller key, as in the from-scratch rule.
-        keys = np.array(sorted(local), np.int64)
-        rank = {k: i for i, k in enumerate(map(tuple, keys.tolist()))}
-        remap = np.empty(len(local), np.int32)
-        for k, i in local.items():
-            remap[i] = rank[k]
-        local = rank
-        tcand = np.sort(remap[np.asarray(tedges)], 1).astype(np.int32)
+        n = len(ring)
+        tris = np.array([[v, ring[k], ring[(k + 1) % n]] for k in range(n)], np.int64)
+        plan = CollapsePlan(v, v, tuple(ring), tuple(star), (), (), tuple(map(tuple, tris.tolist())))
+        return self._export([(plan, tris, region, position)])[0]
 
-        inside = np.concatenate([self.face_pts[f] for f in plan.star])
-        if len(inside):
-            hold = in_triangle_perturbed(xy[new][None], self.points[inside][:, None, :])
-            t_of_p = hold.argmax(1)
-            if not hold[np.arange(len(inside)), t_of_p].all():
-                raise RuntimeError("a point of the star is not covered after the collapse")
+    def _export(self, jobs) -> list[CandidateStencil]:
+        """Builds the stencils of ``(plan, triangles, region, moved)`` jobs.
+
+        Everything is done on concatenated arrays over all jobs (edge keys,
+        local numbering, exact point location); the per-job Python work is
+        slicing only.
+        """
+        if not jobs:
+            return []
+        xy = self.tri.xy
+        nv = len(xy)
+        nj = len(jobs)
+        n_tri = np.array([len(job[1]) for job in jobs])
+        tris = np.concatenate([job[1] for job in jobs])  # (sum T, 3)
+        tri_job = np.repeat(np.arange(nj), n_tri)
+        coords = xy[tris]  # (sum T, 3, 2)
+        for j, (plan, t, _region, moved) in enumerate(jobs):
+            if moved is not None:
+                s = slice(int(n_tri[:j].sum()), int(n_tri[: j + 1].sum()))
+                coords[s] = np.where((t == plan.source)[..., None], moved, coords[s])
+        tri_start = np.concatenate([[0], np.cumsum(n_tri)])
+
+        # Local edges: keys coded job-major, so np.unique numbers every job's
+        # edges contiguously and in increasing key order within the job.
+        e = np.sort(np.stack([tris, tris[:, [1, 2, 0]]], -1), -1)  # (sum T, 3, 2)
+        code = (np.repeat(tri_job, 3) * nv + e[..., 0].ravel()) * nv + e[..., 1].ravel()
+        ucode, inv = np.unique(code, return_inverse=True)
+        ujob = ucode // (nv * nv)
+        edge_start = np.searchsorted(ujob, np.arange(nj + 1))
+        ukeys = np.stack([(ucode // nv) % nv, ucode % nv], 1)
+        tcand = np.sort(inv.reshape(-1, 3) - edge_start[tri_job][:, None], 1).astype(np.int32)
+
+        # Exact location of every inside point among its job's new triangles:
+        # one row per (point, triangle) pair, one predicate call in total.
+        n_in = np.array([len(job[2][2]) for job in jobs])
+        inside = np.concatenate([job[2][2] for job in jobs]).astype(np.int64)
+        pt_job = np.repeat(np.arange(nj), n_in)
+        reps = n_tri[pt_job]
+        pair_pt = np.repeat(np.arange(len(inside)), reps)
+        first = np.repeat(np.cumsum(reps) - reps, reps)
+        pair_tri = tri_start[pt_job][pair_pt] + (np.arange(len(pair_pt)) - first)
+        hold = in_triangle_perturbed(coords[pair_tri], self.points[inside[pair_pt]])
+        hit = np.flatnonzero(hold)
+        # The perturbed location is a partition: exactly one triangle each.
+        if len(hit) != len(inside) or np.any(pair_pt[hit] != np.arange(len(inside))):
+            raise RuntimeError("a point of the star is not covered exactly once after the change")
+        t_global = pair_tri[hit]  # index into tris
+        t_local = t_global - tri_start[pt_job]
+        in_cand = tcand[t_global]
+
+        # Points outside the region keep their (link) edge: look its key up.
+        n_out = np.array([len(job[2][3]) for job in jobs])
+        outside = np.concatenate([job[2][3] for job in jobs]).astype(np.int64)
+        if len(outside):
+            out_job = np.repeat(np.arange(nj), n_out)
+            ring_arr = [np.asarray(job[2][0], np.int64) for job in jobs]
+            link = np.concatenate([job[2][4] for job in jobs])
+            a = np.concatenate([r[job[2][4]] for r, job in zip(ring_arr, jobs)])
+            b = np.concatenate([r[(job[2][4] + 1) % len(r)] for r, job in zip(ring_arr, jobs)])
+            del link
+            lk = (out_job * nv + np.minimum(a, b)) * nv + np.maximum(a, b)
+            out_local = (np.searchsorted(ucode, lk) - edge_start[out_job]).astype(np.int32)
+            out_cand = np.repeat(out_local[:, None], 3, 1)
         else:
-            t_of_p = np.zeros(0, np.int64)
+            out_cand = np.zeros((0, 3), np.int32)
 
-        ring, n = plan.ring, len(plan.ring)
-        outside_ids, outside_cand = [], []
-        before = 0.0
-        for k in range(n):
-            a, b = ring[k], ring[(k + 1) % n]
-            before += self.edge_cost.get(edge_key(plan.source, a), 0.0)
-            lk = edge_key(a, b)
-            before += self.edge_cost.get(lk, 0.0)
-            f = plan.star[k]
-            g = tri.nbr[f][tri.tri[f].index(plan.source)]
-            if g >= 0:
-                ids = self.face_pts[g]
-                if len(ids):
-                    sel = ids[(self.pt_edge[ids, 0] == lk[0]) & (self.pt_edge[ids, 1] == lk[1])]
-                    outside_ids.append(sel)
-                    outside_cand.append(np.full((len(sel), 3), local[lk], np.int32))
-        point_ids = np.concatenate([inside] + outside_ids).astype(np.int64)
-        cand = np.concatenate([tcand[t_of_p]] + outside_cand).reshape(-1, 3).astype(np.int32)
-        tp = np.concatenate([t_of_p, np.full(len(point_ids) - len(inside), -1)]).astype(np.int64)
-        return CandidateStencil(plan, keys, xy[keys], point_ids, cand, tp, before)
+        in_start = np.concatenate([[0], np.cumsum(n_in)])
+        out_start = np.concatenate([[0], np.cumsum(n_out)])
+        edges_all = xy[ukeys]
+        out = []
+        for j, (plan, _t, region, moved) in enumerate(jobs):
+            es = slice(edge_start[j], edge_start[j + 1])
+            si = slice(in_start[j], in_start[j + 1])
+            so = slice(out_start[j], out_start[j + 1])
+            keys = ukeys[es]
+            edges = edges_all[es]
+            if moved is not None:
+                edges = np.where((keys == plan.source)[..., None], moved, edges)
+            out.append(CandidateStencil(
+                plan, keys, edges,
+                np.concatenate([inside[si], outside[so]]),
+                np.concatenate([in_cand[si], out_cand[so]]),
+                np.concatenate([t_local[si], np.full(n_out[j], -1, np.int64)]),
+                region[5], moved))
+        return out
 
     def pack(self, cands: list[CandidateStencil]) -> EdgeStencil:
         """Pads candidate stencils into one batch (see :class:`Buckets`)."""
@@ -263,7 +401,7 @@ class TransportPlan:
 
     # ------------------------------------------------------------- mutation
     def apply(self, cand: CandidateStencil, scored: tuple[object, int]) -> set[int]:
-        """Performs a scored collapse and updates points, edges and costs.
+        """Performs a scored change (collapse or relocation) and updates the plan.
 
         Args:
           cand: the candidate (exported against the current state).
@@ -276,7 +414,21 @@ class TransportPlan:
         """
         res, row = scored
         plan = cand.plan
-        new_ids = np.asarray(self.tri.collapse(plan), np.int64)
+        tri = self.tri
+        if cand.moved is None:
+            new_ids = np.asarray(tri.collapse(plan), np.int64)
+            for a in plan.ring:
+                k = edge_key(plan.source, a)
+                self.edge_cost.pop(k, None)
+                self.edge_solid.pop(k, None)
+        else:
+            v = plan.source
+            if tuple(tri.star(v)[1]) != plan.star:
+                raise ValueError("stale relocation: the star has changed")
+            tri.move(v, cand.moved)
+            new_ids = np.asarray(plan.star, np.int64)
+        for v in plan.ring + (plan.source, plan.target):
+            self._star_version[v] += 1
         n_in = int((cand.triangle_of_point >= 0).sum())
         inside = cand.point_ids[:n_in]
         fid = new_ids[cand.triangle_of_point[:n_in]]
@@ -290,19 +442,14 @@ class TransportPlan:
                 self.face_pts[int(f)] = chunk
         assign = np.asarray(res.assignment[row, : len(cand.point_ids)])
         self.pt_edge[cand.point_ids] = cand.keys[assign]
-        for a in plan.ring:
-            k = edge_key(plan.source, a)
-            self.edge_cost.pop(k, None)
-            self.edge_solid.pop(k, None)
         for i, (a, b) in enumerate(cand.keys):
             k = (int(a), int(b))
             self.edge_cost[k] = float(res.edge_cost[row, i])
             self.edge_solid[k] = bool(res.solid[row, i])
         dirty = set(plan.ring)
         dirty.add(plan.target)
-        tri = self.tri
         for f in new_ids:
             for g in tri.nbr[f]:
                 if g >= 0:
                     dirty.update(tri.tri[g])
-        return {v for v in dirty if not tri.pinned[v]}
+        return {v for v in dirty if tri.alive[v] and not tri.pinned[v]}

@@ -145,6 +145,7 @@ class Triangulation:
         self._xyl = self.xy.tolist()  # scalar predicates read Python floats
         self.tri = simp.tolist()
         self.nbr = nbr.tolist()
+        self._stars: dict[int, tuple] = {}
         self.vface = [-1] * len(self.xy)
         for f, t in enumerate(self.tri):
             for v in t:
@@ -171,13 +172,20 @@ class Triangulation:
         e.sort(axis=1)
         return np.unique(e, axis=0)
 
-    def star(self, v: int) -> tuple[list[int], list[int]]:
+    def star(self, v: int) -> tuple[tuple[int, ...], tuple[int, ...]]:
         """CCW one-ring of an interior vertex.
+
+        Cached: the greedy loop asks for the same stars many times between
+        two changes; :meth:`collapse` and :meth:`flip` drop the entries of
+        the vertices whose stars they touch.
 
         Returns:
           ``(ring, faces)``: ``ring[k]`` is the k-th neighbour and ``faces[k]``
           the triangle ``(v, ring[k], ring[k+1])``.
         """
+        hit = self._stars.get(v)
+        if hit is not None:
+            return hit
         if self.pinned[v] or not self.alive[v]:
             raise ValueError(f"vertex {v} is pinned or dead and has no closed star")
         f0 = self.vface[v]
@@ -190,7 +198,9 @@ class Triangulation:
             faces.append(f)
             f = self.nbr[f][(k + 1) % 3]  # across edge (v, t[k+2])
             if f == f0:
-                return ring, faces
+                out = (tuple(ring), tuple(faces))
+                self._stars[v] = out
+                return out
             if f < 0 or len(faces) > len(self.tri):
                 raise RuntimeError(f"broken star around vertex {v}")
 
@@ -232,6 +242,22 @@ class Triangulation:
             if v in (a, b):
                 continue
             if _orient1(self._xyl, v, a, b) <= 0:
+                return False
+        return True
+
+    def in_kernel_at(self, polygon: list[int], p: np.ndarray) -> bool:
+        """Whether point ``p`` lies strictly inside the kernel of a CCW polygon.
+
+        This is the embedding test of a vertex relocation: moving the centre
+        of a star to ``p`` keeps every triangle of the star positively
+        oriented exactly when ``p`` sees every polygon edge on its left.
+        """
+        n = len(polygon)
+        px, py = float(p[0]), float(p[1])
+        xy = self._xyl
+        for k in range(n):
+            (ax, ay), (bx, by) = xy[polygon[k]], xy[polygon[(k + 1) % n]]
+            if orient_scalar(ax, ay, bx, by, px, py) <= 0:
                 return False
         return True
 
@@ -410,6 +436,7 @@ class Triangulation:
         self._replace_nbr(f_p, f, g)
         for v, h in ((s, f), (p, f), (r, g), (q, g)):
             self.vface[v] = h
+            self._stars.pop(v, None)
         return f, g
 
     def flip_spoke(self, v: int, a: int) -> tuple[int, int]:
@@ -465,7 +492,39 @@ class Triangulation:
                 self.vface[u] = f
         self.alive[v] = False
         self.vface[v] = -1
+        for u in (v,) + tuple(ring):
+            self._stars.pop(u, None)
         return ids
+
+    def move(self, v: int, p: np.ndarray) -> None:
+        """Moves interior vertex ``v`` to ``p`` inside the kernel of its one-ring.
+
+        Raises:
+          ValueError: ``v`` is pinned or dead, or ``p`` would fold a triangle.
+        """
+        ring, _ = self.star(v)
+        if not self.in_kernel_at(ring, p):
+            raise ValueError(f"moving vertex {v} to {tuple(p)} would fold a triangle over")
+        self.xy[v] = p
+        self._xyl[v] = [float(p[0]), float(p[1])]
+
+    def set_positions(self, xy: np.ndarray) -> None:
+        """Moves many vertices at once; the corners must stay where they are.
+
+        Raises:
+          ValueError: a corner moves, or some triangle would not be strictly
+            counter-clockwise (exact test) -- nothing is changed then.
+        """
+        xy = np.asarray(xy, np.float64)
+        if xy.shape != self.xy.shape:
+            raise ValueError(f"positions must have shape {self.xy.shape}, got {xy.shape}")
+        if np.any(xy[self.pinned] != self.xy[self.pinned]):
+            raise ValueError("the pinned corners cannot move")
+        t = self.triangles()
+        if not (orient(xy[t[:, 0]], xy[t[:, 1]], xy[t[:, 2]]) > 0).all():
+            raise ValueError("these positions would fold a triangle over")
+        self.xy = xy.copy()
+        self._xyl = self.xy.tolist()
 
     # ----------------------------------------------------------- location
     def locate_in(self, points: np.ndarray, faces: list[int]) -> np.ndarray:
