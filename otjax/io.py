@@ -165,12 +165,14 @@ def read_image(path) -> np.ndarray:
       (480, 640)
     """
     import matplotlib.image
-    from PIL import UnidentifiedImageError
+    from PIL import Image, UnidentifiedImageError
 
     try:
         pixels = matplotlib.image.imread(os.fspath(path))
     except UnidentifiedImageError:
         raise ValueError(f"{path}: not a readable image") from None
+    except Image.DecompressionBombError as err:  # Pillow's guard against huge images
+        raise ValueError(f"{path}: {err}") from None
     except SyntaxError as err:  # Pillow reports some corrupt headers this way
         raise ValueError(f"{path}: not a readable image ({err})") from None
     return _grayscale(pixels)
