@@ -161,7 +161,7 @@ def bench(sizes, batches, repeat, seed, edges_per_stencil):
                 rng = np.random.default_rng(seed)
                 n_e = edges_per_stencil or max(4, n_p // 2)
                 stencils = [random_stencil(rng, n_e, n_p) for _ in range(n_b)]
-                buckets = Buckets(min_edges=1, min_points=1, batch_sizes=(n_b,))
+                buckets = Buckets(min_edges=1, min_points=1, max_batch=n_b, point_budget=2**40, min_batch=n_b)
                 host = pack_edge_stencils(stencils, buckets, dtype=dtype)
                 dev = jax.device_put(host)
                 ref = numpy_batched_cost(host)

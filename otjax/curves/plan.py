@@ -168,6 +168,7 @@ class TransportPlan:
         _uniq, starts = np.unique(keys[order], return_index=True)
         groups = np.split(order, starts[1:])
         xy = self.tri.xy
+        self.buckets.grow(1, max((len(g) for g in groups), default=1))
         chunk = self.buckets.max_batch
         for s in range(0, len(groups), chunk):
             stencils, ekeys = [], []
@@ -391,6 +392,9 @@ class TransportPlan:
           candidate ``i`` in a kernel result, to pass to :meth:`apply`.
         """
         deltas, rows = [], []
+        if cands:
+            # Grow first, so that the chunk length matches the batch capacity.
+            self.buckets.grow(max(len(c.keys) for c in cands), max(len(c.point_ids) for c in cands))
         step = self.buckets.max_batch
         for s in range(0, len(cands), step):
             chunk = cands[s:s + step]

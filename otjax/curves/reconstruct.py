@@ -27,7 +27,9 @@ def _check_number(name: str, value, *, minimum: float = 0.0, integer: bool = Fal
         return None
     kind = (int, np.integer) if integer else (int, float, np.integer, np.floating)
     if isinstance(value, bool) or not isinstance(value, kind):
-        raise ValueError(f"{name} must be {'an integer' if integer else 'a number'}, got {value!r}")
+        what = "an integer" if integer else "a number"
+        # Bad input is a ValueError everywhere in otjax (DESIGN.md), types included.
+        raise ValueError(f"{name} must be {what}, got {value!r}")  # noqa: TRY004
     if not np.isfinite(value) or value < minimum:
         raise ValueError(f"{name} must be finite and >= {minimum}, got {value!r}")
     return int(value) if integer else float(value)

@@ -1,0 +1,25 @@
+"""otjax: shape reconstruction and simplification by optimal transport, in JAX.
+
+Public API (2D curves):
+
+- :func:`reconstruct_curve` -- points (+ masses) to a simplicial curve.
+- :class:`CurveResult` -- its result: arrays, ``.plot()``, ``.save()``.
+- :func:`read_points`, :func:`image_to_points` -- input files and images.
+- :mod:`otjax.datasets` -- synthetic shapes with known ground truth.
+- :mod:`otjax.metrics` -- distances to that ground truth.
+"""
+
+from otjax import datasets, metrics
+from otjax.curves.reconstruct import reconstruct_curve
+from otjax.curves.result import CurveResult
+from otjax.io import image_to_points, read_points
+
+__all__ = [
+    "CurveResult",
+    "datasets",
+    "image_to_points",
+    "metrics",
+    "read_points",
+    "reconstruct_curve",
+]
+__version__ = "0.1.0"
