@@ -84,16 +84,19 @@ class TransportPlan:
       mass: ``(n,)`` float64 non-negative masses.
       buckets: padding capacities for stencil batches.
       dtype: float dtype for the cost kernel (float64 for exact greedy order).
+      max_source_degree: half-edges leaving a vertex of higher degree are not
+        candidates until its degree falls (see :meth:`candidates`).
     """
 
     def __init__(self, tri: Triangulation, points: np.ndarray, mass: np.ndarray,
-                 buckets: Buckets | None = None, dtype=np.float64):
+                 buckets: Buckets | None = None, dtype=np.float64, max_source_degree: int = 32):
         self.tri = tri
         self.points = np.asarray(points, np.float64)
         self.mass = np.asarray(mass, np.float64)
         self.buckets = buckets if buckets is not None else Buckets()
         self.dtype = dtype
         self.n_kernel_calls = 0
+        self.max_source_degree = max_source_degree
         # Collapse plans depend only on the stars of their two ends: cache
         # them, stamped with per-vertex versions bumped when a star changes.
         self._star_version = [0] * len(tri.xy)
@@ -241,6 +244,15 @@ class TransportPlan:
         call, because per-call overhead, not arithmetic, dominates at these
         sizes.
 
+        Sources of degree above ``max_source_degree`` are skipped for now.
+        Delaunay triangulations of clean data have such hubs (a far vertex
+        fanned to a long run of collinear points: degree 192 on the
+        junctions example); each of their half-edges costs a flip plan
+        quadratic in the degree and a stencil holding the whole run, and the
+        hub is re-scored after every collapse in its ring. Its neighbours
+        collapse first, and its half-edges join the queue once its degree is
+        back under the bound (the hub is then dirty, so it is re-scored).
+
         Args:
           sources: vertex ids; dead and pinned ones are skipped.
           targets: optional ``{source: iterable of targets}`` restricting the
@@ -254,6 +266,8 @@ class TransportPlan:
         jobs = []
         for v in sources:
             if not tri.alive[v] or tri.pinned[v]:
+                continue
+            if len(tri.star(v)[0]) > self.max_source_degree:
                 continue
             region = self._region(v)
             ring = region[0]

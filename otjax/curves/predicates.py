@@ -16,8 +16,6 @@ geometry alone (not of history or vertex numbering).
 
 from __future__ import annotations
 
-from fractions import Fraction
-
 import numpy as np
 
 # Shewchuk's bound for the 2x2 orientation determinant (Adaptive Precision
@@ -27,7 +25,13 @@ _ORIENT_ERR = (3.0 + 16.0 * _EPS) * _EPS
 
 
 def _exact_orient(ax, ay, bx, by, cx, cy) -> int:
-    ax, ay, bx, by, cx, cy = (Fraction(float(v)) for v in (ax, ay, bx, by, cx, cy))
+    # Every double is n / 2^k: over the largest denominator all six are
+    # integers, and Python integer arithmetic is exact and ~20x faster than
+    # Fraction (collinear data, e.g. noise-free polygons, needs this path for
+    # almost every point lying on an edge).
+    ratios = [float(v).as_integer_ratio() for v in (ax, ay, bx, by, cx, cy)]
+    den = max(d for _, d in ratios)
+    ax, ay, bx, by, cx, cy = (n * (den // d) for n, d in ratios)
     det = (bx - ax) * (cy - ay) - (by - ay) * (cx - ax)
     return (det > 0) - (det < 0)
 

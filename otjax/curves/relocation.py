@@ -213,7 +213,7 @@ def refine(plan: TransportPlan, maxiter: int = 100, max_halvings: int = 6) -> tu
         except ValueError:
             step /= 2
             continue
-        new = TransportPlan(tri, plan.points, plan.mass, plan.buckets, plan.dtype)
+        new = TransportPlan(tri, plan.points, plan.mass, plan.buckets, plan.dtype, plan.max_source_degree)
         after = new.total_cost()
         if after < before:
             info.update(accepted=True, cost_after=after, step=step)

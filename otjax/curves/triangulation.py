@@ -127,6 +127,12 @@ class Triangulation:
             simp[flip] = simp[flip][:, [0, 2, 1]]
             nbr[flip] = nbr[flip][:, [0, 2, 1]]
             bad = s == 0
+            # Qhull's orientation is arbitrary, hence the re-orientation above;
+            # but on near-degenerate input two of its triangles can overlap,
+            # which shows as a directed edge used twice once all are CCW.
+            directed = np.stack([simp, simp[:, [1, 2, 0]]], -1).reshape(-1, 2)
+            _, first, count = np.unique(directed, axis=0, return_inverse=True, return_counts=True)
+            bad |= (count[first.ravel()] > 1).reshape(-1, 3).any(1)
             used = np.zeros(len(self.xy), bool)
             used[simp.ravel()] = True
             missing = use & ~used
@@ -332,16 +338,16 @@ class Triangulation:
                 return False
             if with_source:  # the paper's flip: quad (source, c, a, b) convex
                 return _orient1(self._xyl, source, c, b) > 0
-            others = [x for x in poly if x not in (c, a, b)]
-            if not others:
-                return True
-            o = np.asarray(others)
-            inside = (
-                (orient(xy[c], xy[a], xy[o]) >= 0)
-                & (orient(xy[a], xy[b], xy[o]) >= 0)
-                & (orient(xy[b], xy[c], xy[o]) >= 0)
-            )
-            return not inside.any()
+            # Scalar predicates with early exit: rings are short, and NumPy's
+            # per-call overhead made this the hottest line on collinear data.
+            xyl = self._xyl
+            for x in poly:
+                if x in (c, a, b):
+                    continue
+                if (_orient1(xyl, c, a, x) >= 0 and _orient1(xyl, a, b, x) >= 0
+                        and _orient1(xyl, b, c, x) >= 0):
+                    return False
+            return True
 
         while True:
             n = len(poly)
@@ -566,7 +572,8 @@ class Triangulation:
     def check(self) -> None:
         """Raises ``AssertionError`` unless the structure is a valid embedding.
 
-        Checks: every triangle strictly CCW (exact); neighbour links symmetric
+        Checks: every triangle strictly CCW (exact); no directed edge in two
+        triangles (no overlap); neighbour links symmetric
         and consistent; every interior edge in two triangles, boundary edges
         only between corners; Euler characteristic of a disk; all live
         vertices referenced and strictly inside the pinned box.
@@ -587,7 +594,9 @@ class Triangulation:
                 assert self.tri[g] is not None, "link to a freed triangle"
                 assert f in self.nbr[g], "asymmetric neighbour link"
                 assert {u, w} <= set(self.tri[g]), "neighbour does not share the edge"
-        e = t[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)
+        directed = t[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)
+        assert len(np.unique(directed, axis=0)) == len(directed), "two triangles overlap (fold-over)"
+        e = directed.copy()
         e.sort(axis=1)
         _, count = np.unique(e, axis=0, return_counts=True)
         assert count.max() <= 2, "edge in more than two triangles"

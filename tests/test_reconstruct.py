@@ -1,0 +1,245 @@
+"""End-to-end acceptance of ``reconstruct_curve`` on shapes with known truth.
+
+Distances are relative to the bounding-box diagonal ``D`` of the clean shape.
+Each expensive reconstruction runs once per module (fixtures), and several
+tests read it.
+"""
+
+import json
+
+import jsonschema
+import numpy as np
+import pytest
+
+import otjax
+from otjax import datasets, metrics
+from otjax.curves.result import json_schema
+
+
+def components(n_vertices: int, edges: np.ndarray) -> int:
+    parent = list(range(n_vertices))
+
+    def find(i):
+        while parent[i] != i:
+            parent[i] = parent[parent[i]]
+            i = parent[i]
+        return i
+
+    for a, b in edges:
+        parent[find(a)] = find(b)
+    return len({find(i) for i in range(n_vertices)})
+
+
+def assert_one_closed_cycle(result, n: int) -> None:
+    deg = np.bincount(result.edges.ravel(), minlength=len(result.vertices))
+    assert len(result.vertices) == n, f"{len(result.vertices)} vertices, expected {n}"
+    assert len(result.edges) == n
+    assert np.all(deg == 2), f"degrees {deg}"
+    assert components(n, result.edges) == 1
+    assert len(result.isolated) == 0
+
+
+@pytest.fixture(scope="module")
+def clean_star():
+    pts, truth = datasets.star(3000, noise=0.0, seed=1)
+    return otjax.reconstruct_curve(pts, n_vertices=10), truth
+
+
+@pytest.fixture(scope="module")
+def noisy_star():
+    pts, truth = datasets.star(3000, noise=0.01, seed=2)
+    return otjax.reconstruct_curve(pts, n_vertices=10), truth
+
+
+def test_noise_free_star_recovers_its_corners(clean_star):
+    result, truth = clean_star
+    d = truth["diagonal"]
+    assert_one_closed_cycle(result, 10)
+    # Each output vertex is near a distinct true corner (a bijection).
+    dist = np.linalg.norm(result.vertices[:, None] - truth["corners"][None], axis=-1)
+    assert len(set(dist.argmin(1))) == 10
+    assert dist.min(1).max() <= 0.003 * d, f"worst vertex {dist.min(1).max() / d:.4%} of D"
+
+
+def test_noisy_star_corners_and_hausdorff(noisy_star):
+    result, truth = noisy_star
+    d = truth["diagonal"]
+    assert_one_closed_cycle(result, 10)
+    err = metrics.corner_errors(result.vertices, truth["corners"]) / d
+    assert err.mean() <= 0.01, f"mean corner error {err.mean():.3%}"
+    assert err.max() <= 0.02, f"max corner error {err.max():.3%}"
+    h = metrics.hausdorff(metrics.edges_to_segments(result.vertices, result.edges), truth["segments"]) / d
+    assert h <= 0.025, f"Hausdorff {h:.3%}"
+
+
+def test_saved_json_validates_and_round_trips(noisy_star, tmp_path):
+    result, _ = noisy_star
+    path = tmp_path / "star.json"
+    result.save(path)
+    doc = json.loads(path.read_text())
+    jsonschema.validate(doc, json_schema())
+    back = otjax.CurveResult.load(path)
+    np.testing.assert_array_equal(back.vertices, result.vertices)
+    np.testing.assert_array_equal(back.edges, result.edges)
+    np.testing.assert_array_equal(back.edge_relevance, result.edge_relevance)
+    assert back.total_cost == result.total_cost
+    assert back.params == result.params
+
+
+# Outliers: σ = 2% D and as many uniform outliers as shape points, in a box
+# 20% larger than the shape's. What a user does (paper §3.4, Figs. 1 and 10):
+# give the greedy a few more vertices than the shape needs, so that outlier
+# clusters get vertices of their own instead of dragging the shape's, then
+# keep the relevant edges. Budget and threshold are fixed here, not tuned per
+# run: OUTLIER_BUDGET vertices, relevance >= OUTLIER_RELEVANCE.
+OUTLIER_POINTS = 1500
+OUTLIER_BUDGET = 30
+OUTLIER_RELEVANCE = 100.0
+
+
+@pytest.fixture(scope="module")
+def star_with_outliers():
+    pts, truth = datasets.star(OUTLIER_POINTS, noise=0.02, seed=3)
+    pts, truth = datasets.with_outliers(pts, truth, OUTLIER_POINTS, seed=4)
+    result = otjax.reconstruct_curve(pts, n_vertices=OUTLIER_BUDGET, relevance=OUTLIER_RELEVANCE)
+    return result, truth
+
+
+def test_outliers_recall_and_precision(star_with_outliers):
+    result, truth = star_with_outliers
+    d = truth["diagonal"]
+    kept = metrics.edges_to_segments(result.vertices, result.edges)
+    recall = metrics.length_within(truth["segments"], kept, 0.03 * d)
+    precision = metrics.length_within(kept, truth["segments"], 0.03 * d)
+    assert recall >= 0.9, f"recall {recall:.3f}"
+    assert precision >= 0.9, f"precision {precision:.3f}"
+
+
+@pytest.fixture(scope="module")
+def junction_shape():
+    pts, truth = datasets.junctions(2000, noise=0.0, seed=5)
+    n = len(truth["corners"])
+    return otjax.reconstruct_curve(pts, n_vertices=n), truth
+
+
+def test_junctions_and_open_ends(junction_shape):
+    result, truth = junction_shape
+    d = truth["diagonal"]
+    deg = np.bincount(result.edges.ravel(), minlength=len(result.vertices))
+    for where, want in zip(truth["junctions"], truth["junction_degree"]):
+        near = np.linalg.norm(result.vertices - where, axis=1) <= 0.02 * d
+        assert np.any(near & (deg == want)), f"no degree-{want} vertex within 2% D of {where}"
+    for end in truth["ends"]:
+        near = np.linalg.norm(result.vertices - end, axis=1) <= 0.02 * d
+        assert np.any(near & (deg == 1)), f"open end {end} lost"
+
+
+@pytest.fixture(scope="module")
+def skyline_pair():
+    pts, truth = datasets.skyline(1500, noise=0.005, seed=6)
+    n = len(truth["corners"]) + len(truth["ends"])
+    with_reloc = otjax.reconstruct_curve(pts, n_vertices=n, relocation=100, final_relocations=1)
+    without = otjax.reconstruct_curve(pts, n_vertices=n, relocation=0, final_relocations=0)
+    return with_reloc, without, truth
+
+
+def test_relocation_improves_skyline_corners(skyline_pair):
+    with_reloc, without, truth = skyline_pair
+    corners = np.concatenate([truth["corners"], truth["ends"]])
+    e_with = metrics.corner_errors(with_reloc.vertices, corners).mean()
+    e_without = metrics.corner_errors(without.vertices, corners).mean()
+    assert e_with <= 0.7 * e_without, f"with {e_with:.4g} vs without {e_without:.4g}"
+    assert with_reloc.total_cost < without.total_cost
+
+
+def test_refinement_never_increases_cost(skyline_pair):
+    closed_form, _, truth = skyline_pair
+    pts, _ = datasets.skyline(1500, noise=0.005, seed=6)
+    n = len(truth["corners"]) + len(truth["ends"])
+    refined = otjax.reconstruct_curve(pts, n_vertices=n, relocation=100, final_relocations=1, refine=True)
+    assert refined.total_cost <= closed_form.total_cost
+    info = refined.history["refine"]
+    assert info["values"][-1] <= info["values"][0]  # L-BFGS lowered its own objective
+
+
+def small_case(seed=0):
+    pts, _ = datasets.star(400, noise=0.01, seed=seed)
+    return pts
+
+
+def test_same_seed_gives_identical_bytes(tmp_path):
+    pts = small_case()
+    a = otjax.reconstruct_curve(pts, n_vertices=10, seed=7)
+    b = otjax.reconstruct_curve(pts, n_vertices=10, seed=7)
+    for ext in ("svg", "json"):
+        a.save(tmp_path / f"a.{ext}")
+        b.save(tmp_path / f"b.{ext}")
+    assert (tmp_path / "a.svg").read_bytes() == (tmp_path / "b.svg").read_bytes()
+    # The JSON records the wall time, the one field that may differ.
+    ja, jb = (json.loads((tmp_path / f"{k}.json").read_text()) for k in "ab")
+    ja.pop("seconds"), jb.pop("seconds")
+    assert json.dumps(ja) == json.dumps(jb)
+
+
+def test_scaling_all_masses_scales_cost_only():
+    pts = small_case(1)
+    one = otjax.reconstruct_curve(pts, n_vertices=10)
+    three = otjax.reconstruct_curve(pts, np.full(len(pts), 3.0), n_vertices=10)
+    np.testing.assert_allclose(three.vertices, one.vertices, rtol=1e-12, atol=1e-12)
+    np.testing.assert_array_equal(three.edges, one.edges)
+    np.testing.assert_allclose(three.total_cost, 3 * one.total_cost, rtol=1e-9)
+    np.testing.assert_allclose(three.edge_mass, 3 * one.edge_mass, rtol=1e-9)
+
+
+def test_masses_weight_the_fit():
+    # Two parallel strokes, one with 20x the mass: a single edge must sit
+    # much closer to the heavy one.
+    rng = np.random.default_rng(3)
+    x = rng.uniform(0, 1, 400)
+    pts = np.concatenate([np.c_[x[:200], np.zeros(200)], np.c_[x[200:], np.full(200, 0.1)]])
+    mass = np.concatenate([np.full(200, 20.0), np.ones(200)])
+    result = otjax.reconstruct_curve(pts, mass, n_vertices=2)
+    assert len(result.edges) == 1
+    assert np.abs(result.vertices[:, 1]).max() < 0.02
+
+
+def test_tolerance_mode_bounds_the_error_and_is_monotone():
+    pts = small_case(2)
+    loose = otjax.reconstruct_curve(pts, tolerance=0.05)
+    tight = otjax.reconstruct_curve(pts, tolerance=0.02)
+    assert len(tight.vertices) > len(loose.vertices) >= 10
+    for r, tol in ((loose, 0.05), (tight, 0.02)):
+        length2 = ((r.vertices[r.edges[:, 0]] - r.vertices[r.edges[:, 1]]) ** 2).sum(1)
+        rms = np.sqrt(length2 / r.edge_relevance)  # sqrt((N + T) / M) per kept edge
+        assert np.all(rms <= np.sqrt(2) * tol * (1 + 1e-9))
+
+
+def test_relevance_threshold_only_removes_edges():
+    pts = small_case(3)
+    full = otjax.reconstruct_curve(pts, n_vertices=14)
+    cut = float(np.median(full.edge_relevance))
+    kept = otjax.reconstruct_curve(pts, n_vertices=14, relevance=cut)
+    assert len(kept.edges) == int((full.edge_relevance >= cut).sum())
+    assert np.all(kept.edge_relevance >= cut)
+    assert kept.total_cost == full.total_cost  # filtering is after the transport
+
+
+def test_image_input_recovers_the_drawing():
+    image, truth = datasets.drawing(size=64, shape="star")
+    pts, mass = otjax.image_to_points(image, invert=True, threshold=0.05)
+    result = otjax.reconstruct_curve(pts, mass, n_vertices=10)
+    err = metrics.corner_errors(result.vertices, truth["corners"])
+    assert err.max() <= 3.0, f"corner errors in pixels {err}"
+
+
+@pytest.mark.parametrize("bad, message", [
+    (dict(n_vertices=0), "n_vertices"),
+    (dict(n_vertices=10**6), "n_vertices"),
+    (dict(n_vertices=10, relevance=-1.0), "relevance"),
+    (dict(n_vertices=10, tolerance=0.0), "tolerance"),
+    (dict(n_vertices=10, relocation=2.5), "relocation"),
+    (dict(), "n_vertices"),
+])
+def test_bad_parameters_are_named(bad, message):
+    with pytest.raises(ValueError, match=message):
+        otjax.reconstruct_curve(small_case(), **bad)
