@@ -12,8 +12,10 @@ $(BIN)/activate:
 install: $(BIN)/activate
 	$(BIN)/pip install --quiet -e ".[test]"
 
+# The main job on a built-in example: 1000 noisy points of a star -> 10 vertices.
 demo: install
-	$(BIN)/python -m otjax.demo
+	$(BIN)/otjax curve --example noisy-star --points 1000 -o out/noisy-star.png -o out/noisy-star.svg \
+		-o out/noisy-star.json
 
 test: install
 	$(BIN)/python -m pytest -q

@@ -233,12 +233,12 @@ def test_image_input_recovers_the_drawing():
 
 
 @pytest.mark.parametrize("bad, message", [
-    (dict(n_vertices=0), "n_vertices"),
-    (dict(n_vertices=10**6), "n_vertices"),
-    (dict(n_vertices=10, relevance=-1.0), "relevance"),
-    (dict(n_vertices=10, tolerance=0.0), "tolerance"),
-    (dict(n_vertices=10, relocation=2.5), "relocation"),
-    (dict(), "n_vertices"),
+    ({"n_vertices": 0}, "n_vertices"),
+    ({"n_vertices": 10**6}, "n_vertices"),
+    ({"n_vertices": 10, "relevance": -1.0}, "relevance"),
+    ({"n_vertices": 10, "tolerance": 0.0}, "tolerance"),
+    ({"n_vertices": 10, "relocation": 2.5}, "relocation"),
+    ({}, "n_vertices"),
 ])
 def test_bad_parameters_are_named(bad, message):
     with pytest.raises(ValueError, match=message):
