@@ -58,6 +58,8 @@ def _curve_parser(sub) -> argparse.ArgumentParser:
     )
     p.add_argument("--tolerance", type=float, metavar="T", help="stop collapsing at this transport error")
     p.add_argument("--relevance", type=float, metavar="R", help="drop edges less relevant than R")
+    p.add_argument("--density", type=float, metavar="F",
+                   help="drop edges whose mass per length is below F (0..1) times the largest")
     p.add_argument("--relocation", type=int, metavar="K", help="relocate during the last K collapses")
     p.add_argument("--final-relocations", type=int, metavar="P", help="relocation passes at the end")
     p.add_argument("--refine", action="store_true", default=None, help="refine vertices by gradient descent")
@@ -119,6 +121,7 @@ def _load(args, usage) -> tuple:
         "n_vertices": args.n_vertices,
         "tolerance": args.tolerance,
         "relevance": args.relevance,
+        "density": args.density,
         "relocation": args.relocation,
         "final_relocations": args.final_relocations,
         "refine": args.refine,

@@ -36,7 +36,8 @@ def _check_number(name: str, value, *, minimum: float = 0.0, integer: bool = Fal
 
 
 def reconstruct_curve(points, masses=None, n_vertices: int | None = None, *,
-                      tolerance: float | None = None, relevance: float = 0.0, relocation: int = 100,
+                      tolerance: float | None = None, relevance: float = 0.0, density: float = 0.0,
+                      relocation: int = 100,
                       final_relocations: int = 1, refine: bool = False, seed: int = 0,
                       merge_duplicates: bool = False, progress: bool = False) -> CurveResult:
     """Reconstructs a curve (vertices and edges) from a weighted 2D point set.
@@ -52,6 +53,11 @@ def reconstruct_curve(points, masses=None, n_vertices: int | None = None, *,
       relevance: keep only solid edges whose relevance
         ``M_e |e|^2 / (N_e + T_e)`` (paper §3.4) is at least this; ``0``
         keeps every solid edge.
+      density: keep only solid edges whose mass per unit length ``M_e/|e|``
+        is at least this fraction (in ``[0, 1]``) of the largest one. Not in
+        the paper: its relevance does not depend on density at all (``M_e``
+        cancels against ``N_e + T_e``), so it cannot tell a sparse outlier
+        edge from a dense one on the shape; see the README.
       relocation: relocate the vertices of the modified one-ring after each
         of the last ``relocation`` collapses (paper: 100); ``0`` disables.
         Ignored in pure tolerance mode, where the end is not known ahead.
@@ -88,11 +94,14 @@ def reconstruct_curve(points, masses=None, n_vertices: int | None = None, *,
     if tolerance is not None and tolerance <= 0:
         raise ValueError(f"tolerance must be > 0, got {tolerance}")
     relevance = _check_number("relevance", relevance)
+    density = _check_number("density", density)
+    if density > 1:
+        raise ValueError(f"density must be in [0, 1], got {density}")
     relocation = _check_number("relocation", relocation, integer=True)
     final_relocations = _check_number("final_relocations", final_relocations, integer=True)
     seed = _check_number("seed", seed, integer=True)
     params = {"n_vertices": n_vertices, "tolerance": tolerance, "relevance": relevance,
-              "relocation": relocation, "final_relocations": final_relocations, "refine": bool(refine),
+              "density": density, "relocation": relocation, "final_relocations": final_relocations, "refine": bool(refine),
               "seed": seed, "merge_duplicates": bool(merge_duplicates), "n_points": len(points)}
 
     timings = {}
@@ -120,7 +129,7 @@ def reconstruct_curve(points, masses=None, n_vertices: int | None = None, *,
         t0 = time.perf_counter()
         plan, refined = refine_plan(plan)
         timings["refine"] = time.perf_counter() - t0
-    result = result_from_plan(plan, relevance, params, time.perf_counter() - t_start)
+    result = result_from_plan(plan, relevance, params, time.perf_counter() - t_start, density)
     result.history = {"collapses": stats.collapses, "relocations": moved, "scored": stats.scored,
                       "kernel_calls": plan.n_kernel_calls, "seconds": timings,
                       "compiled_shapes": len(plan.buckets.shapes_seen),
@@ -158,10 +167,12 @@ def vertex_and_edge_masses(plan: TransportPlan) -> tuple[dict, dict]:
     return edge_mass, vertex_mass
 
 
-def result_from_plan(plan: TransportPlan, relevance: float, params: dict, seconds: float) -> CurveResult:
-    """Filters the solid edges of a plan by relevance and packs a result.
+def result_from_plan(plan: TransportPlan, relevance: float, params: dict, seconds: float,
+                     density: float = 0.0) -> CurveResult:
+    """Filters the solid edges of a plan by relevance and density; packs a result.
 
-    Kept: solid edges with relevance ``M_e |e|^2 / (N_e + T_e) >= relevance``,
+    Kept: solid edges with relevance ``M_e |e|^2 / (N_e + T_e) >= relevance``
+    and ``M_e / |e| >= density * max`` (max over the solid edges),
     their endpoints, and isolated vertices (vertices that receive mass but
     lie on no kept edge). Vertices are numbered in increasing internal id.
     The pinned box corners and every edge touching them are scaffolding and
@@ -170,9 +181,12 @@ def result_from_plan(plan: TransportPlan, relevance: float, params: dict, second
     tri = plan.tri
     edge_mass, vertex_mass = vertex_and_edge_masses(plan)
     kept, masses, rel = [], [], []
-    for key in sorted(edge_mass):
+    shape_edges = [k for k in sorted(edge_mass) if not (tri.pinned[k[0]] or tri.pinned[k[1]])]
+    dens = {k: edge_mass[k] / float(np.linalg.norm(tri.xy[k[0]] - tri.xy[k[1]])) for k in shape_edges}
+    floor = density * max(dens.values(), default=0.0)
+    for key in shape_edges:  # edges touching the box corners are scaffolding, not shape
         a, b = key
-        if tri.pinned[a] or tri.pinned[b]:  # the box is scaffolding, not shape
+        if dens[key] < floor:
             continue
         length2 = float(((tri.xy[a] - tri.xy[b]) ** 2).sum())
         cost = plan.edge_cost[key]

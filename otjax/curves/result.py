@@ -181,6 +181,41 @@ class CurveResult:
             n = -1 if self.points is None else len(self.points)
             self.masses = _float_array(self.masses, "masses", (n,))
 
+    # --- filtering ----------------------------------------------------------
+
+    def edge_density(self) -> np.ndarray:
+        """``(m,)`` mass per unit length of each edge, ``M_e / |e|``."""
+        length = np.linalg.norm(self.vertices[self.edges[:, 0]] - self.vertices[self.edges[:, 1]], axis=1)
+        return self.edge_mass / np.where(length > 0, length, np.inf)
+
+    def filtered(self, relevance: float = 0.0, density: float = 0.0) -> CurveResult:
+        """A copy keeping the edges with relevance ``>= relevance`` and linear
+        mass density ``>= density`` times the largest one.
+
+        For exploring thresholds without reconstructing again. Vertices that
+        lose all their edges are dropped (vertex masses are not stored in a
+        result, so they are not turned into isolated vertices); isolated
+        vertices stay. ``reconstruct_curve(..., relevance=, density=)`` gives
+        the same edges.
+        """
+        if not (np.isfinite(relevance) and relevance >= 0):
+            raise ValueError(f"relevance must be finite and >= 0, got {relevance!r}")
+        if not (0 <= density <= 1):
+            raise ValueError(f"density must be in [0, 1], got {density!r}")
+        dens = self.edge_density()
+        keep = self.edge_relevance >= relevance
+        if len(dens):
+            keep &= dens >= density * dens.max()
+        used = np.unique(np.concatenate([self.edges[keep].ravel(), self.isolated]))
+        index = np.full(len(self.vertices), -1, np.int64)
+        index[used] = np.arange(len(used))
+        return CurveResult(
+            vertices=self.vertices[used], edges=index[self.edges[keep]].reshape(-1, 2),
+            isolated=index[self.isolated], edge_mass=self.edge_mass[keep],
+            edge_relevance=self.edge_relevance[keep], total_cost=self.total_cost,
+            params={**self.params, "relevance": float(relevance), "density": float(density)},
+            seconds=self.seconds, points=self.points, masses=self.masses, history=self.history)
+
     # --- JSON -------------------------------------------------------------
 
     def to_dict(self) -> dict:
