@@ -131,11 +131,7 @@ def test_compiled_shapes_stay_few_over_2000_collapses():
     plan = TransportPlan(Triangulation(np.unique(pts, axis=0)), pts, np.ones(n), buckets=buckets)
     dirty = {int(v) for v in np.nonzero(plan.tri.alive & ~plan.tri.pinned)[0][:64]}
     for _ in range(2000):
-        cands = []
-        for v in sorted(dirty):
-            if plan.tri.alive[v]:
-                ring, _ = plan.tri.star(v)
-                cands += [c for c in (plan.candidate(v, w) for w in ring) if c is not None]
+        cands = plan.candidates(sorted(dirty))  # every half-edge out of the dirty vertices
         _delta, rows = plan.score(cands)
         pick = int(rng.integers(len(cands)))
         dirty = plan.apply(cands[pick], rows[pick])
