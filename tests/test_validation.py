@@ -7,6 +7,14 @@ from hypothesis import strategies as st
 
 from otjax.validation import check_count, check_nonnegative, check_points, check_target
 
+
+def assert_rejected(check, args, words):
+    """``check(*args)`` raises a ValueError whose message contains every word."""
+    with pytest.raises(ValueError) as info:
+        check(*args)
+    for word in words:
+        assert word in str(info.value)
+
 TRIANGLE = [[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]]
 
 
@@ -43,10 +51,7 @@ TRIANGLE = [[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]]
     ],
 )
 def test_bad_points_raise_value_error_naming_the_problem(points, masses, words):
-    with pytest.raises(ValueError) as info:
-        check_points(points, masses)
-    for word in words:
-        assert word in str(info.value)
+    assert_rejected(check_points, (points, masses), words)
 
 
 def test_collinearity_is_exact():
@@ -147,10 +152,7 @@ def test_valid_input_passes_unchanged(n, seed, integer_input, with_masses):
     ],
 )
 def test_check_target_rejects(value, n_points, words):
-    with pytest.raises(ValueError) as info:
-        check_target(value, n_points)
-    for word in words:
-        assert word in str(info.value)
+    assert_rejected(check_target, (value, n_points), words)
 
 
 def test_check_target_accepts():

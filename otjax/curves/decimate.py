@@ -129,13 +129,14 @@ def decimate(plan: TransportPlan, n_vertices: int | None = None, *, tolerance: f
             heapq.heappush(heap, (float(d), next(tie), key, version[key[0]]))
 
     rescore(range(len(tri.xy)))
+    live = _interior_count(plan)  # kept up to date below: one collapse removes one vertex
     bar = None
     if progress:
         from tqdm.auto import tqdm
 
-        total = max(_interior_count(plan) - target, 0) if n_vertices is not None else None
+        total = max(live - target, 0) if n_vertices is not None else None
         bar = tqdm(total=total, desc="collapses", unit="collapse")
-    while _interior_count(plan) > target and heap:
+    while live > target and heap:
         _, _, key, ver = heapq.heappop(heap)
         entry = entries.get(key)
         if entry is None or entry[2] != ver or ver != version[key[0]] or not tri.alive[key[0]]:
@@ -146,7 +147,8 @@ def decimate(plan: TransportPlan, n_vertices: int | None = None, *, tolerance: f
         stats.seconds["apply"] += time.perf_counter() - t0
         entries.pop(key)
         stats.collapses += 1
-        remaining = _interior_count(plan) - target
+        live -= 1
+        remaining = live - target
         if relocation > 0 and n_vertices is not None and remaining < relocation:
             t0 = time.perf_counter()
             more, moved = relocate(plan, sorted(cand.plan.ring), admissible)

@@ -271,7 +271,11 @@ class TransportPlan:
                 continue
             region = self._region(v)
             ring = region[0]
-            wanted = ring if targets is None else [w for w in ring if w in set(targets[v])]
+            if targets is None:
+                wanted = ring
+            else:
+                allowed = set(targets[v])
+                wanted = [w for w in ring if w in allowed]
             for w in wanted:
                 plan = self._plan(v, w)
                 if plan is not None:
@@ -286,22 +290,37 @@ class TransportPlan:
         out = self.candidates([source], {source: [target]})
         return out[0] if out else None
 
-    def relocation_candidate(self, v: int, position) -> CandidateStencil | None:
-        """Exports the stencil of moving vertex ``v`` to ``position``.
+    def relocation_candidates(self, moves) -> list[CandidateStencil]:
+        """Exports the stencils of moving vertices, all in one batched export.
 
-        Returns ``None`` unless ``position`` lies strictly inside the kernel of
-        the one-ring of ``v`` (the only moves that keep the embedding).
+        Args:
+          moves: ``(v, position)`` pairs, each judged against the current
+            state (moves of neighbouring vertices interact; the caller applies
+            non-overlapping ones).
+
+        Returns:
+          One candidate per move whose ``position`` lies strictly inside the
+          kernel of the one-ring of ``v`` (the only moves that keep the
+          embedding); the others are left out.
         """
         tri = self.tri
-        position = np.asarray(position, np.float64)
-        region = self._region(v)
-        ring, star = region[0], region[1]
-        if not tri.in_kernel_at(ring, position):
-            return None
-        n = len(ring)
-        tris = np.array([[v, ring[k], ring[(k + 1) % n]] for k in range(n)], np.int64)
-        plan = CollapsePlan(v, v, tuple(ring), tuple(star), (), (), tuple(map(tuple, tris.tolist())))
-        return self._export([(plan, tris, region, position)])[0]
+        jobs = []
+        for v, position in moves:
+            position = np.asarray(position, np.float64)
+            ring, star = tri.star(v)
+            if not tri.in_kernel_at(ring, position):
+                continue
+            n = len(ring)
+            tris = np.array([[v, ring[k], ring[(k + 1) % n]] for k in range(n)], np.int64)
+            plan = CollapsePlan(v, v, tuple(ring), tuple(star), (), (), tuple(map(tuple, tris.tolist())))
+            jobs.append((plan, tris, self._region(v), position))
+        return self._export(jobs)
+
+    def relocation_candidate(self, v: int, position) -> CandidateStencil | None:
+        """The stencil of moving ``v`` to ``position``, or ``None`` if that
+        would fold a triangle over (see :meth:`relocation_candidates`)."""
+        out = self.relocation_candidates([(v, position)])
+        return out[0] if out else None
 
     def _export(self, jobs) -> list[CandidateStencil]:
         """Builds the stencils of ``(plan, triangles, region, moved)`` jobs.

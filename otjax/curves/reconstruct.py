@@ -13,7 +13,7 @@ import time
 
 import numpy as np
 
-from otjax.curves.decimate import decimate
+from otjax.curves.decimate import decimate, within_tolerance
 from otjax.curves.plan import TransportPlan
 from otjax.curves.relocation import refine as refine_plan
 from otjax.curves.relocation import relocate
@@ -100,8 +100,8 @@ def reconstruct_curve(points, masses=None, n_vertices: int | None = None, *,
     relocation = _check_number("relocation", relocation, integer=True)
     final_relocations = _check_number("final_relocations", final_relocations, integer=True)
     seed = _check_number("seed", seed, integer=True)
-    params = {"n_vertices": n_vertices, "tolerance": tolerance, "relevance": relevance,
-              "density": density, "relocation": relocation, "final_relocations": final_relocations, "refine": bool(refine),
+    params = {"n_vertices": n_vertices, "tolerance": tolerance, "relevance": relevance, "density": density,
+              "relocation": relocation, "final_relocations": final_relocations, "refine": bool(refine),
               "seed": seed, "merge_duplicates": bool(merge_duplicates), "n_points": len(points)}
 
     timings = {}
@@ -109,13 +109,9 @@ def reconstruct_curve(points, masses=None, n_vertices: int | None = None, *,
     plan = TransportPlan(Triangulation(points), points, masses)
     timings["init"] = time.perf_counter() - t0
     stats = decimate(plan, n_vertices, tolerance=tolerance, relocation=relocation, progress=progress)
-    timings.update({k: v for k, v in stats.seconds.items()})
+    timings.update(stats.seconds)
     t0 = time.perf_counter()
-    admissible = None
-    if tolerance is not None:
-        from otjax.curves.decimate import within_tolerance
-
-        admissible = within_tolerance(tolerance)
+    admissible = within_tolerance(tolerance) if tolerance is not None else None
     moved = stats.relocations
     for _ in range(final_relocations):
         live = np.nonzero(plan.tri.alive & ~plan.tri.pinned)[0]
@@ -133,7 +129,7 @@ def reconstruct_curve(points, masses=None, n_vertices: int | None = None, *,
     result.history = {"collapses": stats.collapses, "relocations": moved, "scored": stats.scored,
                       "kernel_calls": plan.n_kernel_calls, "seconds": timings,
                       "compiled_shapes": len(plan.buckets.shapes_seen),
-                      "refine": None if refined is None else {k: v for k, v in refined.items()}}
+                      "refine": refined}
     return result
 
 
@@ -181,16 +177,15 @@ def result_from_plan(plan: TransportPlan, relevance: float, params: dict, second
     tri = plan.tri
     edge_mass, vertex_mass = vertex_and_edge_masses(plan)
     kept, masses, rel = [], [], []
+    # Edges touching the box corners are scaffolding, not shape.
     shape_edges = [k for k in sorted(edge_mass) if not (tri.pinned[k[0]] or tri.pinned[k[1]])]
-    dens = {k: edge_mass[k] / float(np.linalg.norm(tri.xy[k[0]] - tri.xy[k[1]])) for k in shape_edges}
-    floor = density * max(dens.values(), default=0.0)
-    for key in shape_edges:  # edges touching the box corners are scaffolding, not shape
-        a, b = key
-        if dens[key] < floor:
+    length = {k: float(np.linalg.norm(tri.xy[k[0]] - tri.xy[k[1]])) for k in shape_edges}
+    floor = density * max((edge_mass[k] / length[k] for k in shape_edges), default=0.0)
+    for key in shape_edges:
+        if edge_mass[key] / length[key] < floor:
             continue
-        length2 = float(((tri.xy[a] - tri.xy[b]) ** 2).sum())
         cost = plan.edge_cost[key]
-        r = edge_mass[key] * length2 / cost if cost > 0 else float(np.finfo(np.float64).max)
+        r = edge_mass[key] * length[key] ** 2 / cost if cost > 0 else float(np.finfo(np.float64).max)
         if r >= relevance:
             kept.append(key)
             masses.append(edge_mass[key])

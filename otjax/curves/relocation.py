@@ -67,8 +67,8 @@ def relocate(plan: TransportPlan, vertices, admissible=None) -> tuple[set[int], 
     done in rounds: each round exports the relocation stencils of every
     vertex still waiting, scores them in one batched call, and applies the
     improving ones greedily by decreasing gain, skipping any whose stencil a
-    move of this round has touched; those wait for the next round. Every vertex is
-    considered once.
+    move of this round has touched; those wait for the next round. Every
+    vertex is considered once.
 
     Args:
       plan: the transport plan, modified in place.
@@ -85,13 +85,9 @@ def relocate(plan: TransportPlan, vertices, admissible=None) -> tuple[set[int], 
     dirty: set[int] = set()
     moved = 0
     while waiting:
-        cands = []
-        for v in waiting:
-            pos = optimal_position(plan, v)
-            if pos is not None and np.all(np.isfinite(pos)) and np.any(pos != tri.xy[v]):
-                c = plan.relocation_candidate(v, pos)
-                if c is not None:
-                    cands.append(c)
+        moves = [(v, pos) for v, pos in ((v, optimal_position(plan, v)) for v in waiting)
+                 if pos is not None and np.all(np.isfinite(pos)) and np.any(pos != tri.xy[v])]
+        cands = plan.relocation_candidates(moves)
         if not cands:
             break
         delta, rows = plan.score(cands)
