@@ -7,19 +7,25 @@ Public API (2D curves):
 - :func:`read_points`, :func:`image_to_points` -- input files and images.
 - :mod:`otjax.datasets` -- synthetic shapes with known ground truth.
 - :mod:`otjax.metrics` -- distances to that ground truth.
+- :mod:`otjax.curves` -- the building blocks of the 2D pipeline (triangulation,
+  transport plan, stencil batches, JAX cost kernels, decimation, relocation),
+  for research code; see ``notebooks/``.
+- :mod:`otjax.stencil` -- padded stencil batches shared by the kernels.
 """
 
-from otjax import datasets, metrics
+from otjax import curves, datasets, metrics, stencil
 from otjax.curves.reconstruct import reconstruct_curve
 from otjax.curves.result import CurveResult
 from otjax.io import image_to_points, read_points
 
 __all__ = [
     "CurveResult",
+    "curves",
     "datasets",
     "image_to_points",
     "metrics",
     "read_points",
     "reconstruct_curve",
+    "stencil",
 ]
 __version__ = "0.1.0"
