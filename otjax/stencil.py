@@ -92,7 +92,7 @@ class Buckets:
         number of compilations of a kernel driven by these buckets.
     """
 
-    def __init__(self, min_edges: int = 16, min_points: int = 32, max_batch: int = 128,
+    def __init__(self, min_edges: int = 16, min_points: int = 32, max_batch: int = 32,
                  point_budget: int = 128 * 256, min_batch: int = 8):
         for name, v in (("min_edges", min_edges), ("min_points", min_points), ("max_batch", max_batch),
                         ("min_batch", min_batch)):

@@ -1,10 +1,24 @@
 """Greedy decimation: collapse half-edges in increasing order of cost increase.
 
-The driver of de Goes et al. 2011, Fig. 4: an exhaustive priority queue of
-half-edge collapses keyed by ``delta``; after each collapse (and the
-relocations that follow it near the end) the half-edges leaving the dirty
-vertices are re-exported and re-scored in one batched kernel call. Stale queue
-entries are skipped lazily by a per-vertex version counter.
+The driver of de Goes et al. 2011, Fig. 4, with the three queues otjax offers:
+
+``"exhaustive"``
+  every half-edge is scored up front; after each collapse (and the
+  relocations that follow it near the end) the half-edges leaving the dirty
+  vertices are re-exported and re-scored in one batched kernel call. Stale
+  queue entries are skipped lazily by a per-vertex version counter.
+``"multiple-choice"``
+  paper §3.5: each step draws ``choices`` half-edges uniformly at random,
+  scores those without a fresh score in one batched call, and collapses the
+  cheapest. Nothing is scored that is not drawn, so a step costs the same
+  whatever the size of the triangulation. Below ``switch_factor`` times the
+  target the loop switches to the exhaustive queue, where the few remaining
+  choices matter most.
+``"parallel"``
+  not in the paper: each round pops the cheapest candidates whose regions
+  do not overlap (an independent set), collapses them all, and re-scores the
+  union of their dirty regions in one batch. Rounds are what a GPU pays for;
+  the README measures what the order change costs.
 """
 
 from __future__ import annotations
@@ -19,6 +33,10 @@ import numpy as np
 from otjax.curves.plan import TransportPlan
 from otjax.curves.relocation import relocate
 
+QUEUES = ("exhaustive", "multiple-choice", "parallel")
+# Bound on the (point, new triangle) pairs of one export: ~100 bytes each.
+EXPORT_PAIR_BUDGET = 2_000_000
+
 
 @dataclass
 class DecimationStats:
@@ -29,21 +47,22 @@ class DecimationStats:
       relocations: number of vertex moves applied.
       scored: number of candidate stencils scored.
       kernel_calls: number of batched kernel calls.
-      seconds: wall time, split into ``export``, ``score``, ``apply`` and
-        ``relocate``.
+      rounds: number of rounds (one per collapse, except in parallel mode).
+      switched_at: live vertex count at which the multiple-choice queue
+        handed over to the exhaustive one (``None`` if it never did).
+      seconds: wall time, split into ``export`` (stencils and flip plans),
+        ``score`` (kernel calls), ``apply`` (topology and plan updates),
+        ``relocate`` and ``sample`` (drawing half-edges).
     """
 
     collapses: int = 0
     relocations: int = 0
     scored: int = 0
     kernel_calls: int = 0
-    seconds: dict = field(
-        default_factory=lambda: {"export": 0.0, "score": 0.0, "apply": 0.0, "relocate": 0.0})
-
-
-def _interior_count(plan: TransportPlan) -> int:
-    t = plan.tri
-    return int((t.alive & ~t.pinned).sum())
+    rounds: int = 0
+    switched_at: int | None = None
+    seconds: dict = field(default_factory=lambda: {
+        "export": 0.0, "score": 0.0, "apply": 0.0, "relocate": 0.0, "sample": 0.0})
 
 
 def within_tolerance(tolerance: float):
@@ -73,8 +92,141 @@ def within_tolerance(tolerance: float):
     return ok
 
 
+class _Scores:
+    """Scored candidates keyed by half-edge, valid while the source's version holds.
+
+    ``version[v]`` is bumped whenever a change touches the stencils of the
+    half-edges leaving ``v``; an entry scored at an older version is stale.
+    """
+
+    def __init__(self, plan: TransportPlan, stats: DecimationStats, admissible):
+        self.plan = plan
+        self.stats = stats
+        self.admissible = admissible
+        self.version = [0] * len(plan.tri.xy)
+        self.entries: dict[tuple[int, int], tuple] = {}  # key -> (delta, cand, row, version)
+        self.heap: list = []
+        self.use_heap = False
+        self._tie = itertools.count()
+
+    def fresh(self, key) -> bool:
+        entry = self.entries.get(key)
+        return entry is not None and entry[3] == self.version[key[0]]
+
+    def push(self, key) -> None:
+        delta, _, _, ver = self.entries[key]
+        heapq.heappush(self.heap, (delta, next(self._tie), key, ver))
+
+    def pop(self):
+        """Cheapest fresh entry of the heap (removed), or ``None``."""
+        while self.heap:
+            _, _, key, ver = heapq.heappop(self.heap)
+            entry = self.entries.get(key)
+            if entry is None or entry[3] != ver or ver != self.version[key[0]]:
+                continue
+            if not self.plan.tri.alive[key[0]]:
+                continue
+            return key
+        return None
+
+    def rescore(self, sources, targets: dict | None = None) -> None:
+        """Exports and scores the half-edges leaving ``sources`` (see
+        :meth:`TransportPlan.candidates`), in chunks bounded in points."""
+        plan = self.plan
+        for chunk in plan.source_chunks(sorted(sources), EXPORT_PAIR_BUDGET):
+            t0 = time.perf_counter()
+            cands = plan.candidates(chunk, targets)
+            t1 = time.perf_counter()
+            delta, rows = plan.score(cands)
+            self.stats.seconds["export"] += t1 - t0
+            self.stats.seconds["score"] += time.perf_counter() - t1
+            self.stats.scored += len(cands)
+            for c, d, r in zip(cands, delta, rows):
+                if self.admissible is not None and not self.admissible(c, *r):
+                    continue
+                key = (c.plan.source, c.plan.target)
+                self.entries[key] = (float(d), c, r, self.version[key[0]])
+                if self.use_heap:
+                    self.push(key)
+
+    def bump(self, vertices) -> None:
+        for v in vertices:
+            self.version[v] += 1
+
+
+class _LiveVertices:
+    """Interior live vertices in an array with O(1) removal, for sampling."""
+
+    def __init__(self, tri):
+        self.ids = np.nonzero(tri.alive & ~tri.pinned)[0].tolist()
+        self.where = {v: i for i, v in enumerate(self.ids)}
+
+    def __len__(self) -> int:
+        return len(self.ids)
+
+    def remove(self, v: int) -> None:
+        i = self.where.pop(v)
+        last = self.ids.pop()
+        if last != v:
+            self.ids[i] = last
+            self.where[last] = i
+
+
+def _sample_half_edges(plan: TransportPlan, live: _LiveVertices, rng: np.random.Generator,
+                       k: int) -> list[tuple[int, int]]:
+    """Up to ``k`` distinct half-edges, uniform over the eligible ones.
+
+    Rejection sampling: draw a live interior vertex ``u`` and a slot
+    ``j < D`` (``D`` = the degree bound of candidate sources), keep
+    ``(u, ring(u)[j])`` if the slot exists and the target is not pinned.
+    Every eligible half-edge then has probability ``1 / (V D)`` per draw.
+    """
+    tri = plan.tri
+    bound = plan.max_source_degree
+    out: dict[tuple[int, int], None] = {}
+    ids = live.ids
+    for _ in range(64):  # each round accepts ~deg/D of its draws
+        need = k - len(out)
+        if need <= 0 or not ids:
+            break
+        n = 4 * need * bound // 6 + 8
+        us = rng.integers(0, len(ids), n)
+        js = rng.integers(0, bound, n)
+        for ui, j in zip(us.tolist(), js.tolist()):
+            u = ids[ui]
+            ring = tri.star(u)[0]
+            if j >= len(ring) or len(ring) > bound:
+                continue
+            w = ring[j]
+            if tri.pinned[w]:
+                continue
+            out[(u, w)] = None
+            if len(out) == k:
+                break
+    return list(out)
+
+
+def _lock_set(plan: TransportPlan, cand) -> set[int]:
+    """Vertices whose stencils a collapse reads or writes: the source, its
+    one-ring, and the far vertices of the triangles across its link.
+
+    Two collapses with disjoint lock sets have disjoint stars, neither
+    touches the points or edge costs the other reads, and neither changes
+    the neighbourhood the other's link condition looked at.
+    """
+    tri = plan.tri
+    out = {cand.plan.source, *cand.plan.ring}
+    v = cand.plan.source
+    for f in cand.plan.star:
+        g = tri.nbr[f][tri.tri[f].index(v)]
+        if g >= 0:
+            out.update(tri.tri[g])
+    return out
+
+
 def decimate(plan: TransportPlan, n_vertices: int | None = None, *, tolerance: float | None = None,
-             relocation: int = 0, progress: bool = False) -> DecimationStats:
+             relocation: int = 0, queue: str = "exhaustive", choices: int = 15, switch_factor: float = 5.0,
+             round_fraction: float = 0.1, seed: int = 0, progress: bool = False) -> DecimationStats:
     """Collapses greedily until ``n_vertices`` remain or no collapse is admissible.
 
     Args:
@@ -87,6 +239,15 @@ def decimate(plan: TransportPlan, n_vertices: int | None = None, *, tolerance: f
       relocation: relocate the vertices of the modified one-ring after each
         of the last ``relocation`` collapses (paper §3.5 postpones relocation
         to the last 100). Needs ``n_vertices`` to know which are the last.
+      queue: ``"exhaustive"``, ``"multiple-choice"`` or ``"parallel"`` (see
+        the module docstring).
+      choices: half-edges drawn per step by the multiple-choice queue.
+      switch_factor: the multiple-choice queue hands over to the exhaustive
+        one once fewer than ``switch_factor * n_vertices`` vertices are left
+        (in tolerance mode: once a draw holds no admissible collapse).
+      round_fraction: parallel mode: a round collapses at most this fraction
+        of the collapses still to do (at least one).
+      seed: seed of the multiple-choice draws.
       progress: show a tqdm progress bar.
 
     Returns:
@@ -104,62 +265,109 @@ def decimate(plan: TransportPlan, n_vertices: int | None = None, *, tolerance: f
         raise ValueError("give n_vertices, tolerance, or both")
     if n_vertices is not None and n_vertices < 1:
         raise ValueError(f"n_vertices must be >= 1, got {n_vertices}")
+    if queue not in QUEUES:
+        raise ValueError(f"queue must be one of {QUEUES}, got {queue!r}")
+    if choices < 1:
+        raise ValueError(f"choices must be >= 1, got {choices}")
+    if not 0 < round_fraction <= 1:
+        raise ValueError(f"round_fraction must be in (0, 1], got {round_fraction}")
     admissible = within_tolerance(tolerance) if tolerance is not None else None
     target = n_vertices if n_vertices is not None else 1
     stats = DecimationStats()
     tri = plan.tri
-    version = [0] * len(tri.xy)
-    entries: dict[tuple[int, int], tuple] = {}
-    heap: list = []
-    tie = itertools.count()
-
-    def rescore(sources) -> None:
-        t0 = time.perf_counter()
-        cands = plan.candidates(sorted(sources))
-        t1 = time.perf_counter()
-        delta, rows = plan.score(cands)
-        stats.seconds["export"] += t1 - t0
-        stats.seconds["score"] += time.perf_counter() - t1
-        stats.scored += len(cands)
-        for c, d, r in zip(cands, delta, rows):
-            if admissible is not None and not admissible(c, *r):
-                continue
-            key = (c.plan.source, c.plan.target)
-            entries[key] = (c, r, version[key[0]])
-            heapq.heappush(heap, (float(d), next(tie), key, version[key[0]]))
-
-    rescore(range(len(tri.xy)))
-    live = _interior_count(plan)  # kept up to date below: one collapse removes one vertex
+    scores = _Scores(plan, stats, admissible)
+    live = _LiveVertices(tri)
     bar = None
     if progress:
         from tqdm.auto import tqdm
 
-        total = max(live - target, 0) if n_vertices is not None else None
+        total = max(len(live) - target, 0) if n_vertices is not None else None
         bar = tqdm(total=total, desc="collapses", unit="collapse")
-    while live > target and heap:
-        _, _, key, ver = heapq.heappop(heap)
-        entry = entries.get(key)
-        if entry is None or entry[2] != ver or ver != version[key[0]] or not tri.alive[key[0]]:
-            continue
-        cand, scored, _ = entry
+
+    def relocating() -> bool:
+        return relocation > 0 and n_vertices is not None and len(live) - target < relocation
+
+    def collapse(key, relocate_ring: bool = True) -> set[int]:
+        """Applies the scored collapse ``key``; returns its dirty vertices."""
+        _, cand, row, _ = scores.entries.pop(key)
         t0 = time.perf_counter()
-        dirty = plan.apply(cand, scored)
+        dirty = plan.apply(cand, row)
         stats.seconds["apply"] += time.perf_counter() - t0
-        entries.pop(key)
         stats.collapses += 1
-        live -= 1
-        remaining = live - target
-        if relocation > 0 and n_vertices is not None and remaining < relocation:
-            t0 = time.perf_counter()
-            more, moved = relocate(plan, sorted(cand.plan.ring), admissible)
-            dirty |= more
-            stats.relocations += moved
-            stats.seconds["relocate"] += time.perf_counter() - t0
-        for v in dirty | {key[0]}:
-            version[v] += 1
+        live.remove(key[0])
+        if relocate_ring and relocating():
+            dirty |= relocate_vertices(cand.plan.ring)
+        scores.bump(dirty | {key[0]})
         if bar is not None:
             bar.update(1)
-        rescore(dirty)
+        return dirty
+
+    def relocate_vertices(vertices) -> set[int]:
+        t0 = time.perf_counter()
+        dirty, moved = relocate(plan, sorted(v for v in vertices if tri.alive[v]), admissible)
+        stats.relocations += moved
+        stats.seconds["relocate"] += time.perf_counter() - t0
+        scores.bump(dirty)
+        return dirty
+
+    if queue == "multiple-choice":
+        rng = np.random.default_rng(seed)
+        switch = switch_factor * target if n_vertices is not None else 0
+        while len(live) > max(target, switch):
+            t0 = time.perf_counter()
+            drawn = _sample_half_edges(plan, live, rng, choices)
+            stats.seconds["sample"] += time.perf_counter() - t0
+            stale: dict[int, list[int]] = {}
+            for u, w in drawn:
+                if not scores.fresh((u, w)):
+                    stale.setdefault(u, []).append(w)
+            if stale:
+                scores.rescore(stale, stale)
+            best = min(((scores.entries[h][0], h) for h in drawn if scores.fresh(h)), default=None)
+            if best is None:  # nothing admissible in this draw: the exhaustive queue decides
+                break
+            collapse(best[1])
+            stats.rounds += 1
+        stats.switched_at = len(live) if len(live) > target else None
+
+    if len(live) > target:
+        # The multiple-choice phase scored only what it drew: score it all.
+        scores.use_heap = True
+        scores.rescore(live.ids)
+    while len(live) > target and queue != "parallel":
+        key = scores.pop()
+        if key is None:
+            break
+        scores.rescore(collapse(key))
+        stats.rounds += 1
+    while len(live) > target and queue == "parallel":
+        budget = max(1, int(round_fraction * (len(live) - target)))
+        chosen, locked, deferred = [], set(), []
+        while len(chosen) < budget:
+            key = scores.pop()
+            if key is None:
+                break
+            lock = _lock_set(plan, scores.entries[key][1])
+            if lock & locked:
+                deferred.append(key)
+                continue
+            chosen.append(key)
+            locked |= lock
+        if not chosen:
+            break
+        dirty: set[int] = set()
+        rings: set[int] = set()
+        for key in chosen:
+            rings.update(scores.entries[key][1].plan.ring)
+            dirty |= collapse(key, relocate_ring=False)
+        # Relocation waits for the round: a move reaches past the lock set.
+        if relocating():
+            dirty |= relocate_vertices(rings)
+        for key in deferred:
+            if scores.fresh(key) and tri.alive[key[0]]:
+                scores.push(key)
+        scores.rescore({v for v in dirty if tri.alive[v]})
+        stats.rounds += 1
     if bar is not None:
         bar.close()
     stats.kernel_calls = plan.n_kernel_calls

@@ -128,24 +128,26 @@ class TransportPlan:
             v, a, b = t[:, k], t[:, (k + 1) % 3], t[:, (k + 2) % 3]
             ok = (orient_perturbed(xy[v], xy[a], xy[v]) > 0) & (orient_perturbed(xy[b], xy[v], xy[v]) > 0)
             vert_face[v[ok]] = fid[ok]
+        # Which points sit exactly on a live vertex: match coordinates by a
+        # sort (complex numbers order lexicographically; -0.0 == 0.0).
         live = np.nonzero(tri.alive)[0]
-        lookup = {tuple(xy[v]): int(vert_face[v]) for v in live}
-        rest = []
-        for i, p in enumerate(pts):
-            f = lookup.get((p[0], p[1]))
-            if f is None:
-                rest.append(i)
-            else:
-                out[i] = f
-        if rest:
-            rest = np.asarray(rest)
+        vkey = xy[live, 0] + 1j * xy[live, 1]
+        order = np.argsort(vkey, kind="stable")
+        vkey = vkey[order]
+        pkey = pts[:, 0] + 1j * pts[:, 1]
+        pos = np.minimum(np.searchsorted(vkey, pkey), len(vkey) - 1)
+        on_vertex = vkey[pos] == pkey
+        out[on_vertex] = vert_face[live[order[pos[on_vertex]]]]
+        rest = np.flatnonzero(out < 0)
+        if len(rest):
             out[rest] = tri.locate(pts[rest])
         return out
 
     def _nearest_edges(self, ids: np.ndarray) -> np.ndarray:
         """``(len(ids), 2)`` edge keys: nearest edge of each point's triangle."""
         tri = self.tri
-        t = np.array([tri.tri[f] for f in self.pt_face[ids]], np.int64).reshape(-1, 3)
+        faces, inv = np.unique(self.pt_face[ids], return_inverse=True)
+        t = np.array([tri.tri[f] for f in faces], np.int64).reshape(-1, 3)[inv.ravel()]
         keys = np.stack([np.sort(t[:, [k, (k + 1) % 3]], 1) for k in range(3)], 1)  # (n, 3, 2)
         # Order each point's three edges by key so that argmin's first-hit rule
         # breaks exact ties towards the smaller key, as the kernel does.
@@ -234,6 +236,32 @@ class TransportPlan:
         outside = np.concatenate(out_ids) if out_ids else np.zeros(0, np.int64)
         outside_link = np.concatenate(out_link) if out_link else np.zeros(0, np.int64)
         return ring, star, inside, outside, outside_link, before
+
+    def source_chunks(self, sources, budget: int):
+        """Splits ``sources`` into runs whose export stays under ``budget``.
+
+        The export of the half-edges leaving ``v`` tests each point of the
+        star against each new triangle of each candidate: about
+        ``deg^2 * points`` (point, triangle) pairs, each ~100 bytes. This
+        bounds them per run (a single source may exceed it alone).
+
+        Yields:
+          Lists of vertex ids, in the order given.
+        """
+        tri = self.tri
+        run, used = [], 0
+        for v in sources:
+            if not tri.alive[v] or tri.pinned[v]:
+                continue
+            ring, star = tri.star(v)
+            work = len(ring) ** 2 * (1 + sum(len(self.face_pts[f]) for f in star))
+            if run and used + work > budget:
+                yield run
+                run, used = [], 0
+            run.append(v)
+            used += work
+        if run:
+            yield run
 
     def candidates(self, sources, targets: dict | None = None) -> list[CandidateStencil]:
         """Exports the collapse stencils of every half-edge leaving ``sources``.

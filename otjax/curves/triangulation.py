@@ -148,6 +148,9 @@ class Triangulation:
         else:
             raise RuntimeError("could not build an embedded initial triangulation")
         self.alive = use.copy()
+        # Qhull's point location is a valid hint while the triangles are still
+        # its own (triangle f is its simplex f); any change drops it.
+        self._hint = (dt, (lo + hi) / 2, float(np.max(hi - lo)))
         self._xyl = self.xy.tolist()  # scalar predicates read Python floats
         self.tri = simp.tolist()
         self.nbr = nbr.tolist()
@@ -434,6 +437,7 @@ class Triangulation:
         tg = self.tri[g]
         g_p = self.nbr[g][(tg.index(p))]  # across (r, q)
         g_q = self.nbr[g][(tg.index(q))]  # across (p, r)
+        self._hint = None
         self.tri[f] = [s, p, r]
         self.nbr[f] = [g_q, g, f_q]
         self.tri[g] = [s, r, q]
@@ -469,6 +473,7 @@ class Triangulation:
         if tuple(ring) != plan.ring or tuple(star) != plan.star:
             raise ValueError("stale collapse plan: the star of the source has changed")
         n = len(ring)
+        self._hint = None
         # Boundary edges keep their direction: the region lies on their left.
         outside = {}
         for k in range(n):
@@ -511,6 +516,7 @@ class Triangulation:
         ring, _ = self.star(v)
         if not self.in_kernel_at(ring, p):
             raise ValueError(f"moving vertex {v} to {tuple(p)} would fold a triangle over")
+        self._hint = None
         self.xy[v] = p
         self._xyl[v] = [float(p[0]), float(p[1])]
 
@@ -529,6 +535,7 @@ class Triangulation:
         t = self.triangles()
         if not (orient(xy[t[:, 0]], xy[t[:, 1]], xy[t[:, 2]]) > 0).all():
             raise ValueError("these positions would fold a triangle over")
+        self._hint = None
         self.xy = xy.copy()
         self._xyl = self.xy.tolist()
 
@@ -558,14 +565,43 @@ class Triangulation:
     def locate(self, points: np.ndarray) -> np.ndarray:
         """Triangle holding each perturbed point, over the whole triangulation.
 
-        Uses a vectorised exact test over all triangles in chunks: simple and
-        exact; the collapse loop never calls it (it relocates locally).
+        While the triangles are still Qhull's, its walk gives a guess per
+        point that the exact test confirms; points near an edge, where the
+        floating-point walk and the perturbed rule may disagree, try the
+        guess's three neighbours. Whatever is left (and everything once the
+        triangulation has changed) goes through an exact test against every
+        triangle in chunks: simple, exact and slow, which is fine because the
+        collapse loop never calls it (it relocates locally).
+
+        Args:
+          points: ``(n, 2)`` points inside the pinned box.
+
+        Returns:
+          ``(n,)`` int64 triangle ids.
         """
-        ids = self.triangle_ids()
-        out = np.empty(len(points), np.int64)
-        chunk = max(1, 2_000_000 // max(len(ids), 1))
-        for s in range(0, len(points), chunk):
-            out[s:s + chunk] = self.locate_in(points[s:s + chunk], ids)
+        points = np.asarray(points, np.float64).reshape(-1, 2)
+        out = np.full(len(points), -1, np.int64)
+        if self._hint is not None and len(points):
+            dt, centre, scale = self._hint
+            guess = np.asarray(dt.find_simplex((points - centre) / scale), np.int64)
+            tri = np.asarray(self.tri, np.int64)
+            nbr = np.asarray(self.nbr, np.int64)
+            todo = np.flatnonzero(guess >= 0)
+            for hop in range(4):
+                if not len(todo):
+                    break
+                f = guess[todo] if hop == 0 else nbr[guess[todo], hop - 1]
+                ok = f >= 0
+                ok[ok] = in_triangle_perturbed(self.xy[tri[f[ok]]], points[todo[ok]])
+                out[todo[ok]] = f[ok]
+                todo = todo[~ok]
+        rest = np.flatnonzero(out < 0)
+        if len(rest):
+            ids = self.triangle_ids()
+            chunk = max(1, 2_000_000 // max(len(ids), 1))
+            for s in range(0, len(rest), chunk):
+                sel = rest[s:s + chunk]
+                out[sel] = self.locate_in(points[sel], ids)
         return out
 
     # ---------------------------------------------------------- validation
