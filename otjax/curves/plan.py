@@ -25,9 +25,13 @@ import jax
 import numpy as np
 
 from otjax.curves import cost as _cost
-from otjax.curves.predicates import in_triangle_perturbed, orient_perturbed
+from otjax.curves.location import locate_pairs
+from otjax.curves.predicates import orient_perturbed
 from otjax.curves.triangulation import CollapsePlan, Triangulation, edge_key
 from otjax.stencil import Buckets, EdgeStencil, pack_edge_stencils
+
+
+_NO_IDS = np.zeros(0, np.int64)
 
 
 class CandidateStencil(NamedTuple):
@@ -93,7 +97,10 @@ class TransportPlan:
         self.tri = tri
         self.points = np.asarray(points, np.float64)
         self.mass = np.asarray(mass, np.float64)
-        self.buckets = buckets if buckets is not None else Buckets()
+        self._point_rows = np.ascontiguousarray(self.points.T)  # (2, n): gathers stay contiguous
+        # Local edge counts hardly vary: start the edge capacity where most
+        # runs end, which saves the recompiles of growing it.
+        self.buckets = buckets if buckets is not None else Buckets(min_edges=64)
         self.dtype = dtype
         self.n_kernel_calls = 0
         self.max_source_degree = max_source_degree
@@ -173,11 +180,9 @@ class TransportPlan:
         _uniq, starts = np.unique(keys[order], return_index=True)
         groups = np.split(order, starts[1:])
         xy = self.tri.xy
-        self.buckets.grow(1, max((len(g) for g in groups), default=1))
-        chunk = self.buckets.max_batch
-        for s in range(0, len(groups), chunk):
+        for batch in self.buckets.batches([len(g) for g in groups]):
             stencils, ekeys = [], []
-            for g in groups[s:s + chunk]:
+            for g in (groups[i] for i in batch):
                 u, v = self.pt_edge[g[0]]
                 stencils.append((xy[[u, v]][None], self.points[g], self.mass[g],
                                  np.zeros((len(g), 3), np.int32)))
@@ -215,27 +220,26 @@ class TransportPlan:
         tri = self.tri
         ring, star = tri.star(v)
         n = len(ring)
-        inside = np.concatenate([self.face_pts[f] for f in star])
-        out_ids, out_link = [], []
-        before = 0.0
+        face_pts = self.face_pts
+        inside = np.concatenate([face_pts[f] for f in star])
         cost = self.edge_cost
+        before = 0.0
+        across = []
         for k in range(n):
             a, b = ring[k], ring[(k + 1) % n]
-            lk = (a, b) if a < b else (b, a)
-            before += cost.get((v, a) if v < a else (a, v), 0.0) + cost.get(lk, 0.0)
+            before += cost.get((v, a) if v < a else (a, v), 0.0) + cost.get((a, b) if a < b else (b, a), 0.0)
             f = star[k]
             g = tri.nbr[f][tri.tri[f].index(v)]
-            if g >= 0:
-                ids = self.face_pts[g]
-                if len(ids):
-                    e = self.pt_edge[ids]
-                    sel = ids[(e[:, 0] == lk[0]) & (e[:, 1] == lk[1])]
-                    if len(sel):
-                        out_ids.append(sel)
-                        out_link.append(np.full(len(sel), k, np.int64))
-        outside = np.concatenate(out_ids) if out_ids else np.zeros(0, np.int64)
-        outside_link = np.concatenate(out_link) if out_link else np.zeros(0, np.int64)
-        return ring, star, inside, outside, outside_link, before
+            across.append(face_pts[g] if g >= 0 else _NO_IDS)
+        # Of the points across each link edge, those assigned to that edge.
+        counts = np.fromiter(map(len, across), np.int64, n)
+        ids = np.concatenate(across)
+        link = np.repeat(np.arange(n), counts)
+        r = np.asarray(ring, np.int64)
+        lo, hi = np.minimum(r, np.roll(r, -1)), np.maximum(r, np.roll(r, -1))
+        e = self.pt_edge[ids]
+        keep = (e[:, 0] == lo[link]) & (e[:, 1] == hi[link])
+        return ring, star, inside, ids[keep], link[keep], before
 
     def source_chunks(self, sources, budget: int):
         """Splits ``sources`` into runs whose export stays under ``budget``.
@@ -371,6 +375,7 @@ class TransportPlan:
                 s = slice(int(n_tri[:j].sum()), int(n_tri[: j + 1].sum()))
                 coords[s] = np.where((t == plan.source)[..., None], moved, coords[s])
         tri_start = np.concatenate([[0], np.cumsum(n_tri)])
+        coords_rows = np.ascontiguousarray(coords.reshape(-1, 6).T)  # (6, sum T)
 
         # Local edges: keys coded job-major, so np.unique numbers every job's
         # edges contiguously and in increasing key order within the job.
@@ -391,7 +396,7 @@ class TransportPlan:
         pair_pt = np.repeat(np.arange(len(inside)), reps)
         first = np.repeat(np.cumsum(reps) - reps, reps)
         pair_tri = tri_start[pt_job][pair_pt] + (np.arange(len(pair_pt)) - first)
-        hold = in_triangle_perturbed(coords[pair_tri], self.points[inside[pair_pt]])
+        hold = locate_pairs(coords_rows[:, pair_tri], self._point_rows[:, inside[pair_pt]])
         hit = np.flatnonzero(hold)
         # The perturbed location is a partition: exactly one triangle each.
         if len(hit) != len(inside) or np.any(pair_pt[hit] != np.arange(len(inside))):
@@ -452,17 +457,19 @@ class TransportPlan:
           ``(delta (len(cands),), rows)``; ``rows[i] = (result, r)`` locates
           candidate ``i`` in a kernel result, to pass to :meth:`apply`.
         """
-        deltas, rows = [], []
-        if cands:
-            # Grow first, so that the chunk length matches the batch capacity.
-            self.buckets.grow(max(len(c.keys) for c in cands), max(len(c.point_ids) for c in cands))
-        step = self.buckets.max_batch
-        for s in range(0, len(cands), step):
-            chunk = cands[s:s + step]
+        delta = np.zeros(len(cands))
+        rows: list = [None] * len(cands)
+        if not cands:
+            return delta, rows
+        # Grow first: every batch then has the same edge capacity.
+        self.buckets.grow(max(len(c.keys) for c in cands))
+        for batch in self.buckets.batches([len(c.point_ids) for c in cands]):
+            chunk = [cands[i] for i in batch]
             res = self.evaluate(self.pack(chunk))
-            deltas.append(np.asarray(res.total[: len(chunk)]) - np.array([c.before for c in chunk]))
-            rows += [(res, r) for r in range(len(chunk))]
-        return (np.concatenate(deltas) if deltas else np.zeros(0)), rows
+            delta[batch] = np.asarray(res.total[: len(chunk)]) - np.array([c.before for c in chunk])
+            for r, i in enumerate(batch):
+                rows[i] = (res, r)
+        return delta, rows
 
     # ------------------------------------------------------------- mutation
     def apply(self, cand: CandidateStencil, scored: tuple[object, int]) -> set[int]:

@@ -1,0 +1,144 @@
+"""Batched point-in-triangle tests: a filtered JAX kernel, exact on the host.
+
+Exporting a collapse stencil locates every point of the star among the new
+triangles: (point, triangle) pairs by the million late in a large run, where
+the NumPy predicate cost ~360 ns a pair (measured: 40 of 60 s of a 50k-point
+run's exhaustive end). :func:`in_triangle_filtered` evaluates the same
+orientation determinants in JAX, with Shewchuk's forward error bound, and
+answers "inside", "outside" or "unsure"; :func:`locate_pairs` settles the
+unsure pairs with the exact host predicate
+(:func:`otjax.curves.predicates.in_triangle_perturbed`). Its answers are
+therefore exactly the host predicate's, pair for pair.
+
+Why the filter is sound even if XLA fuses a multiply-add: the bound covers the
+rounding of both products and the subtraction; a fused evaluation rounds
+fewer times, so its error is no larger.
+"""
+
+from __future__ import annotations
+
+import functools
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from otjax.curves.predicates import _ORIENT_ERR, in_triangle_perturbed
+
+INSIDE, OUTSIDE, UNSURE = 1, 0, -1
+# Pairs per kernel call: two sizes, so at most two compiled shapes.
+SMALL_CHUNK = 1 << 13
+LARGE_CHUNK = 1 << 17
+
+
+def _orient_perturbed_filtered(ax, ay, bx, by, px, py) -> tuple[jax.Array, jax.Array]:
+    """Sign of ``orient(a, b, p + eps (1, eps))`` where the float filter is sure.
+
+    Args:
+      ax, ay, bx, by, px, py: ``(N,)`` float64 coordinates.
+
+    Returns:
+      ``(positive, negative)`` ``(N,)`` bool; both False when the float
+      determinant is too close to zero to trust (and not zero by
+      construction).
+    """
+    left = (bx - ax) * (py - ay)
+    right = (by - ay) * (px - ax)
+    det = left - right
+    sure = jnp.abs(det) > _ORIENT_ERR * (jnp.abs(left) + jnp.abs(right))
+    # Both products exactly zero (an exactly-zero factor each), or p == b:
+    # det is 0 and the perturbation decides, by exact comparisons, as on the
+    # host: the sign of a_y - b_y, else of b_x - a_x.
+    zero = (((bx == ax) | (py == ay)) & ((by == ay) | (px == ax))) | ((px == bx) & (py == by))
+    up = jnp.where(ay != by, ay > by, bx > ax)
+    down = jnp.where(ay != by, ay < by, bx < ax)
+    positive = jnp.where(zero, up, sure & (det > 0))
+    negative = jnp.where(zero, down, sure & (det < 0))
+    return positive, negative
+
+
+@jax.jit
+def in_triangle_filtered(tri: jax.Array, p: jax.Array) -> jax.Array:
+    """Filtered perturbed point-in-triangle test, planar layout.
+
+    Coordinates come as rows (structure of arrays): XLA:CPU vectorises that
+    layout about 3x better than ``(N, 3, 2)`` (measured: 14 vs 35-59 ns a
+    pair).
+
+    Args:
+      tri: ``(6, N)`` float64 rows ``x0, y0, x1, y1, x2, y2`` of
+        counter-clockwise triangles.
+      p: ``(2, N)`` float64 rows ``x, y`` of the query points.
+
+    Returns:
+      ``(N,)`` int8: :data:`INSIDE`, :data:`OUTSIDE` or :data:`UNSURE`. A
+      pair is outside as soon as one edge is surely on the wrong side.
+    """
+    x0, y0, x1, y1, x2, y2 = tri
+    px, py = p
+    p0, n0 = _orient_perturbed_filtered(x0, y0, x1, y1, px, py)
+    p1, n1 = _orient_perturbed_filtered(x1, y1, x2, y2, px, py)
+    p2, n2 = _orient_perturbed_filtered(x2, y2, x0, y0, px, py)
+    return jnp.where(n0 | n1 | n2, OUTSIDE, jnp.where(p0 & p1 & p2, INSIDE, UNSURE)).astype(jnp.int8)
+
+
+@functools.lru_cache(maxsize=None)
+def _padding(size: int) -> tuple[np.ndarray, np.ndarray]:
+    # A padded pair: a unit triangle and a point outside it (never read).
+    tri = np.zeros((6, size))
+    tri[2] = tri[5] = 1.0
+    return tri, np.full((2, size), 2.0)
+
+
+def _chunks(n: int):
+    """``(start, size)`` covering ``n`` pairs with full large chunks first."""
+    s = 0
+    while n - s >= LARGE_CHUNK:
+        yield s, LARGE_CHUNK
+        s += LARGE_CHUNK
+    while s < n:
+        yield s, SMALL_CHUNK
+        s += SMALL_CHUNK
+
+
+def locate_pairs(tri: np.ndarray, p: np.ndarray) -> np.ndarray:
+    """Exact perturbed point-in-triangle test for many pairs.
+
+    Same answers as :func:`otjax.curves.predicates.in_triangle_perturbed`,
+    computed by the filtered kernel in fixed-size chunks; the unsure pairs
+    (a handful on noisy data, more on exactly collinear data) go to the exact
+    host predicate.
+
+    Args:
+      tri: ``(6, N)`` float64 rows ``x0, y0, x1, y1, x2, y2`` of
+        counter-clockwise triangles.
+      p: ``(2, N)`` float64 query points, as rows.
+
+    Returns:
+      ``(N,)`` bool.
+    """
+    n = p.shape[1]
+
+    def exact(idx):
+        return in_triangle_perturbed(tri[:, idx].T.reshape(-1, 3, 2), p[:, idx].T)
+
+    if n < 512:  # below a kernel call's overhead
+        return exact(np.arange(n))
+    out = np.empty(n, np.int8)
+    with jax.enable_x64(True):
+        pending = []
+        for s, size in _chunks(n):
+            t, q = tri[:, s:s + size], p[:, s:s + size]
+            if q.shape[1] < size:
+                pad_t, pad_q = _padding(size)
+                t = np.concatenate([t, pad_t[:, q.shape[1]:]], 1)
+                q = np.concatenate([q, pad_q[:, q.shape[1]:]], 1)
+            pending.append((s, in_triangle_filtered(t, q)))  # dispatched asynchronously
+        for s, res in pending:
+            res = np.asarray(res)
+            out[s:s + len(res)] = res[: n - s]
+    hold = out == INSIDE
+    unsure = np.flatnonzero(out == UNSURE)
+    if len(unsure):
+        hold[unsure] = exact(unsure)
+    return hold
