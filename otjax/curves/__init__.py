@@ -36,13 +36,14 @@ JAX kernels (pure functions of arrays):
 
 Drivers:
 
-- :func:`decimate`, :class:`DecimationStats`, :func:`within_tolerance` -- the
-  greedy collapse loop.
+- :func:`decimate`, :class:`DecimationStats`, :func:`within_tolerance`,
+  :data:`QUEUES` -- the greedy collapse loop and its queue kinds.
 - :func:`optimal_position`, :func:`relocate` -- closed-form relocation
   (paper §3.3); :func:`refine`, :func:`minimize_lbfgs` -- L-BFGS refinement
   on the fixed-assignment cost.
 - :func:`reconstruct_curve`, :class:`CurveResult` -- the pipeline and its
-  result (also at the top level, ``otjax.reconstruct_curve``).
+  result (also at the top level, ``otjax.reconstruct_curve``);
+  :func:`default_initial_vertices` -- its default initial subset size.
 
 Example:
   >>> import numpy as np
@@ -65,15 +66,16 @@ from otjax.curves.cost import (
     segment_sqdist,
     stencil_cost,
 )
-from otjax.curves.decimate import DecimationStats, decimate, within_tolerance
+from otjax.curves.decimate import QUEUES, DecimationStats, decimate, within_tolerance
 from otjax.curves.plan import CandidateStencil, TransportPlan
-from otjax.curves.reconstruct import reconstruct_curve
+from otjax.curves.reconstruct import default_initial_vertices, reconstruct_curve
 from otjax.curves.relocation import minimize_lbfgs, optimal_position, refine, relocate
 from otjax.curves.result import CurveResult
 from otjax.curves.triangulation import CollapsePlan, Triangulation, edge_key
 from otjax.stencil import Buckets, EdgeStencil, pack_edge_stencils
 
 __all__ = [
+    "QUEUES",
     "Buckets",
     "CandidateStencil",
     "CollapsePlan",
@@ -86,6 +88,7 @@ __all__ = [
     "assign_points",
     "batched_stencil_cost",
     "decimate",
+    "default_initial_vertices",
     "edge_key",
     "fixed_assignment_cost",
     "mass_before_rank",
