@@ -170,8 +170,7 @@ class TransportPlan:
         """Runs the batched cost kernel; returns a NumPy ``StencilCost``."""
         self.n_kernel_calls += 1
         with jax.enable_x64(self.dtype == np.float64):
-            out = _cost.batched_stencil_cost(batch)
-            return jax.device_get(out)
+            return _cost.batched_stencil_cost_host(batch)
 
     def _score_all_edges(self) -> None:
         """Computes the cost of every edge that holds points, in batches."""
@@ -191,6 +190,19 @@ class TransportPlan:
             for i, k in enumerate(ekeys):
                 self.edge_cost[k] = float(res.edge_cost[i, 0])
                 self.edge_solid[k] = bool(res.solid[i, 0])
+
+    def solid_of(self, keys: np.ndarray) -> np.ndarray:
+        """``(n,)`` bool: whether each edge key of ``keys (n, 2)`` is solid.
+
+        Looks each distinct key up once (points share few edges).
+        """
+        keys = np.asarray(keys, np.int64).reshape(-1, 2)
+        if not len(keys):
+            return np.zeros(0, bool)
+        uniq, inv = np.unique(keys, axis=0, return_inverse=True)
+        get = self.edge_solid.get
+        flags = np.fromiter((get((int(a), int(b)), False) for a, b in uniq), bool, len(uniq))
+        return flags[inv.ravel()]
 
     def total_cost(self) -> float:
         """Squared W2 cost of the current plan (sum of cached edge costs)."""
@@ -442,10 +454,37 @@ class TransportPlan:
         return out
 
     def pack(self, cands: list[CandidateStencil]) -> EdgeStencil:
-        """Pads candidate stencils into one batch (see :class:`Buckets`)."""
-        return pack_edge_stencils(
-            [(c.edges, self.points[c.point_ids], self.mass[c.point_ids], c.cand) for c in cands],
-            self.buckets, self.dtype)
+        """Pads candidate stencils into one batch (see :class:`Buckets`).
+
+        Same result as :func:`otjax.stencil.pack_edge_stencils`, written with
+        one scatter per field over all candidates instead of a Python loop.
+        """
+        n_e = np.fromiter((len(c.keys) for c in cands), np.int64, len(cands))
+        n_p = np.fromiter((len(c.point_ids) for c in cands), np.int64, len(cands))
+        b_cap, e_cap, p_cap = self.buckets.fit(len(cands), max(int(n_e.max()), 1), max(int(n_p.max()), 1))
+
+        def rows_cols(lengths):
+            row = np.repeat(np.arange(len(lengths)), lengths)
+            col = np.arange(int(lengths.sum())) - np.repeat(np.cumsum(lengths) - lengths, lengths)
+            return row, col
+
+        dtype = self.dtype
+        edges = np.zeros((b_cap, e_cap, 2, 2), dtype)
+        edge_mask = np.zeros((b_cap, e_cap), bool)
+        r, c = rows_cols(n_e)
+        edges[r, c] = np.concatenate([x.edges for x in cands])
+        edge_mask[r, c] = True
+        points = np.zeros((b_cap, p_cap, 2), dtype)
+        mass = np.zeros((b_cap, p_cap), dtype)
+        point_mask = np.zeros((b_cap, p_cap), bool)
+        cand = np.zeros((b_cap, p_cap, 3), np.int32)
+        ids = np.concatenate([x.point_ids for x in cands])
+        r, c = rows_cols(n_p)
+        points[r, c] = self.points[ids]
+        mass[r, c] = self.mass[ids]
+        point_mask[r, c] = True
+        cand[r, c] = np.concatenate([x.cand for x in cands])
+        return EdgeStencil(edges, edge_mask, points, mass, point_mask, cand)
 
     def score(self, cands: list[CandidateStencil]) -> tuple[np.ndarray, list[tuple[object, int]]]:
         """Cost increase ``delta`` of each candidate, batched.

@@ -39,7 +39,8 @@ def reconstruct_curve(points, masses=None, n_vertices: int | None = None, *,
                       tolerance: float | None = None, relevance: float = 0.0, density: float = 0.0,
                       relocation: int = 100,
                       final_relocations: int = 1, refine: bool = False, queue: str = "exhaustive",
-                      choices: int = 15, initial_vertices: int | None = None, seed: int = 0,
+                      choices: int = 15, round_fraction: float = 0.05, initial_vertices: int | None = None,
+                      seed: int = 0,
                       merge_duplicates: bool = False, progress: bool = False) -> CurveResult:
     """Reconstructs a curve (vertices and edges) from a weighted 2D point set.
 
@@ -71,6 +72,8 @@ def reconstruct_curve(points, masses=None, n_vertices: int | None = None, *,
         ``"parallel"`` (independent sets of cheap collapses per round; not
         in the paper). See :func:`otjax.curves.decimate.decimate`.
       choices: half-edges drawn per multiple-choice step (paper: 15).
+      round_fraction: parallel queue: a round collapses at most this
+        fraction of the collapses still to do (README: rounds vs cost).
       initial_vertices: size of the random subset of the points that
         becomes the initial triangulation (paper §3.5); every point still
         carries its mass. ``None``: :func:`default_initial_vertices`.
@@ -114,6 +117,9 @@ def reconstruct_curve(points, masses=None, n_vertices: int | None = None, *,
     if queue not in QUEUES:
         raise ValueError(f"queue must be one of {', '.join(QUEUES)}, got {queue!r}")
     choices = _check_number("choices", choices, minimum=1, integer=True)
+    round_fraction = _check_number("round_fraction", round_fraction)
+    if not 0 < round_fraction <= 1:
+        raise ValueError(f"round_fraction must be in (0, 1], got {round_fraction}")
     if initial_vertices is None:
         initial_vertices = default_initial_vertices(len(points), n_vertices)
     initial_vertices = _check_number("initial_vertices", initial_vertices, minimum=1, integer=True)
@@ -122,7 +128,8 @@ def reconstruct_curve(points, masses=None, n_vertices: int | None = None, *,
     initial_vertices = min(initial_vertices, len(points))
     params = {"n_vertices": n_vertices, "tolerance": tolerance, "relevance": relevance, "density": density,
               "relocation": relocation, "final_relocations": final_relocations, "refine": bool(refine),
-              "queue": queue, "choices": choices, "initial_vertices": initial_vertices,
+              "queue": queue, "choices": choices, "round_fraction": round_fraction,
+              "initial_vertices": initial_vertices,
               "seed": seed, "merge_duplicates": bool(merge_duplicates), "n_points": len(points)}
 
     timings = {}
@@ -136,7 +143,8 @@ def reconstruct_curve(points, masses=None, n_vertices: int | None = None, *,
     plan = TransportPlan(Triangulation(vertices), points, masses)
     timings["init"] = time.perf_counter() - t0
     stats = decimate(plan, n_vertices, tolerance=tolerance, relocation=relocation, queue=queue,
-                     choices=choices, seed=int(rng.integers(2**63)), progress=progress)
+                     choices=choices, round_fraction=round_fraction, seed=int(rng.integers(2**63)),
+                     progress=progress)
     timings.update(stats.seconds)
     t0 = time.perf_counter()
     admissible = within_tolerance(tolerance) if tolerance is not None else None
@@ -185,7 +193,7 @@ def vertex_and_edge_masses(plan: TransportPlan) -> tuple[dict, dict]:
     """
     xy = plan.tri.xy
     keys = plan.pt_edge
-    solid = np.array([plan.edge_solid.get((int(a), int(b)), False) for a, b in keys], bool)
+    solid = plan.solid_of(keys)
     edge_mass: dict = {}
     vertex_mass: dict = {}
     if solid.any():

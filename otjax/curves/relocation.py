@@ -45,7 +45,7 @@ def optimal_position(plan: TransportPlan, v: int) -> np.ndarray | None:
     if not len(ids):
         return None
     other = np.where(keys[:, 0] == v, keys[:, 1], keys[:, 0])
-    solid = np.array([plan.edge_solid.get((int(a), int(b)), False) for a, b in keys], bool)
+    solid = plan.solid_of(keys)
     p, m = plan.points[ids], plan.mass[ids]
     x, b = tri.xy[v], tri.xy[other]
     d = b - x

@@ -1,0 +1,242 @@
+"""The machinery of issue 4: filtered location, batching, sampling, queues.
+
+Each piece is checked against an independent reference: the filtered JAX
+location against the exact host predicate, the packed kernel against the
+plain one, the vectorised packing against the reference packer, the sampler
+against the uniform law (chi-square), a parallel round against the sum of its
+deltas and a from-scratch recomputation.
+"""
+
+from collections import Counter
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+from scipy import stats
+
+import otjax
+from otjax.curves import cost
+from otjax.curves.decimate import _LiveVertices, _lock_set, _sample_half_edges, decimate
+from otjax.curves.location import LARGE_CHUNK, locate_pairs
+from otjax.curves.plan import TransportPlan
+from otjax.curves.reconstruct import vertex_and_edge_masses
+from otjax.curves.predicates import in_triangle_perturbed
+from otjax.curves.triangulation import Triangulation
+from otjax.stencil import Buckets, pack_edge_stencils
+from tests.point_sets import make_points
+from tests.test_plan import make_plan, noisy_shape, scratch_cost
+
+
+def rows(tri: np.ndarray, p: np.ndarray):
+    """``(N, 3, 2)``, ``(N, 2)`` -> the planar layout of :func:`locate_pairs`."""
+    return np.ascontiguousarray(tri.reshape(-1, 6).T), np.ascontiguousarray(p.T)
+
+
+def all_pairs(tri: Triangulation, queries: np.ndarray):
+    t = tri.xy[tri.triangles()]
+    i, j = np.meshgrid(np.arange(len(queries)), np.arange(len(t)), indexing="ij")
+    return t[j.ravel()], queries[i.ravel()]
+
+
+# ------------------------------------------------------------------ location
+@settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(kind=st.sampled_from(["uniform", "near_collinear", "clustered", "duplicates", "grid"]),
+       n=st.integers(8, 60), seed=st.integers(0, 10_000))
+def test_filtered_location_equals_the_exact_predicate(kind, n, seed):
+    rng = np.random.default_rng(seed)
+    pts = make_points(kind, n, seed)
+    tri = Triangulation(np.unique(pts, axis=0))
+    # Queries on vertices, on edge midpoints (often inexact), at random.
+    t = tri.triangles()
+    mid = (tri.xy[t[:, 0]] + tri.xy[t[:, 1]]) / 2
+    inner = tri.xy[tri.alive & ~tri.pinned]
+    span = float(np.ptp(inner, axis=0).max()) or 1.0  # the box is relative to the data
+    queries = np.concatenate([inner, mid, pts + 1e-3 * span * rng.standard_normal(pts.shape)])
+    a, p = all_pairs(tri, queries)
+    want = in_triangle_perturbed(a, p)
+    got = locate_pairs(*rows(a, p))
+    np.testing.assert_array_equal(got, want)
+    # Each query is in exactly one triangle.
+    assert np.all(got.reshape(len(queries), -1).sum(1) == 1)
+
+
+def test_filtered_location_over_chunk_boundaries():
+    rng = np.random.default_rng(1)
+    n = LARGE_CHUNK + 12_345  # one large chunk and small ones after it
+    a = rng.random((n, 3, 2))
+    flip = np.cross(a[:, 1] - a[:, 0], a[:, 2] - a[:, 0]) < 0
+    a[flip] = a[flip][:, [0, 2, 1]]
+    p = rng.random((n, 2))
+    p[::7] = a[::7, 1]  # exactly on a corner: the perturbation decides
+    np.testing.assert_array_equal(locate_pairs(*rows(a, p)), in_triangle_perturbed(a, p))
+
+
+# ------------------------------------------------------------------ batching
+def test_packed_kernel_equals_the_plain_kernel():
+    import jax
+
+    plan = make_plan(np.random.default_rng(2))
+    cands = plan.candidates(np.nonzero(plan.tri.alive & ~plan.tri.pinned)[0][:6].tolist())
+    batch = plan.pack(cands[: plan.buckets.batch_capacity(plan.buckets.point_capacity(
+        max(len(c.point_ids) for c in cands[:8])))][:8])
+    with jax.enable_x64(True):
+        plain = jax.device_get(cost.batched_stencil_cost(batch))
+        host = cost.batched_stencil_cost_host(batch)
+    for name in plain._fields:
+        np.testing.assert_array_equal(getattr(host, name), getattr(plain, name), err_msg=name)
+
+
+def test_vectorised_pack_equals_the_reference_packer():
+    plan = make_plan(np.random.default_rng(3))
+    cands = plan.candidates(np.nonzero(plan.tri.alive & ~plan.tri.pinned)[0][:3].tolist())[:5]
+    got = plan.pack(cands)
+    want = pack_edge_stencils(
+        [(c.edges, plan.points[c.point_ids], plan.mass[c.point_ids], c.cand) for c in cands],
+        plan.buckets, plan.dtype)
+    for name in got._fields:
+        np.testing.assert_array_equal(getattr(got, name), getattr(want, name), err_msg=name)
+
+
+@given(st.lists(st.integers(1, 40_000), min_size=1, max_size=200))
+def test_batches_cover_every_stencil_once_and_fit(sizes):
+    buckets = Buckets()
+    batches = buckets.batches(sizes)
+    flat = np.concatenate(batches)
+    assert sorted(flat.tolist()) == list(range(len(sizes)))
+    for b in batches:
+        cap = buckets.point_capacity(max(sizes[i] for i in b))
+        assert len(b) <= buckets.batch_capacity(cap)
+        assert all(sizes[i] <= cap for i in b)
+
+
+def test_point_capacity_follows_the_batch_not_history():
+    buckets = Buckets(min_points=32)
+    assert buckets.fit(1, 3, 5000)[2] == 8192
+    assert buckets.fit(8, 3, 40)[2] == 64  # a large batch earlier does not pad later ones
+    assert buckets.batch_capacity(8192) * 8192 <= max(buckets.point_budget, 8192)
+
+
+# ------------------------------------------------------------------ sampling
+def eligible_half_edges(plan):
+    tri = plan.tri
+    out = []
+    for u in np.nonzero(tri.alive & ~tri.pinned)[0]:
+        ring = tri.star(int(u))[0]
+        if len(ring) <= plan.max_source_degree:
+            out += [(int(u), w) for w in ring if not tri.pinned[w]]
+    return out
+
+
+def test_sampled_half_edges_are_uniform_and_eligible():
+    rng = np.random.default_rng(4)
+    pts = rng.random((25, 2))
+    plan = TransportPlan(Triangulation(pts), pts, np.ones(len(pts)))
+    everything = eligible_half_edges(plan)
+    live = _LiveVertices(plan.tri)
+    counts = Counter()
+    draws = 0
+    for _ in range(3000):
+        got = _sample_half_edges(plan, live, rng, 3)
+        assert len(set(got)) == len(got) == 3
+        assert set(got) <= set(everything)
+        counts.update(got[:1])  # the first draw of each sample is one uniform draw
+        draws += 1
+    observed = np.array([counts[h] for h in everything])
+    assert stats.chisquare(observed).pvalue > 1e-3, "first draws are not uniform over half-edges"
+
+
+# ------------------------------------------------------------------ queues
+def independent_round(plan):
+    """The parallel queue's selection rule, applied to every candidate."""
+    cands = plan.candidates(np.nonzero(plan.tri.alive & ~plan.tri.pinned)[0].tolist())
+    delta, rows_ = plan.score(cands)
+    chosen, locked = [], set()
+    for i in np.argsort(delta, kind="stable"):
+        lock = _lock_set(plan, cands[i])
+        if not lock & locked:
+            chosen.append(i)
+            locked |= lock
+    return cands, delta, rows_, chosen
+
+
+@pytest.mark.parametrize("seed", [5, 6, 7])
+def test_an_independent_round_changes_the_cost_by_the_sum_of_its_deltas(seed):
+    plan = make_plan(np.random.default_rng(seed), n=200)
+    before = plan.total_cost()
+    cands, delta, rows_, chosen = independent_round(plan)
+    assert len(chosen) >= 5
+    for i in chosen:
+        plan.apply(cands[i], rows_[i])
+    plan.tri.check()
+    after = plan.total_cost()
+    assert after - before == pytest.approx(delta[chosen].sum(), rel=1e-9, abs=1e-12)
+    assert after == pytest.approx(scratch_cost(plan.tri, plan.points, plan.mass), rel=1e-9, abs=1e-15)
+
+
+@pytest.mark.parametrize("queue", ["multiple-choice", "parallel"])
+def test_queues_keep_the_embedding_and_an_exact_plan(queue):
+    rng = np.random.default_rng(8)
+    pts = noisy_shape(rng, 600)
+    mass = rng.uniform(0.5, 2.0, len(pts))
+    keep = np.sort(rng.choice(len(pts), 300, replace=False))  # a random subset as vertices
+    plan = TransportPlan(Triangulation(pts[keep]), pts, mass)
+    stats_ = decimate(plan, 12, queue=queue, relocation=20, seed=1)
+    plan.tri.check()
+    assert int((plan.tri.alive & ~plan.tri.pinned).sum()) == 12
+    assert plan.total_cost() == pytest.approx(scratch_cost(plan.tri, pts, mass), rel=1e-9)
+    if queue == "parallel":
+        assert stats_.rounds * 4 <= stats_.collapses  # 300 -> 12: the 5x of larger runs needs more collapses
+    else:
+        assert stats_.switched_at == 60  # 5 x the target
+    # Every point is located in a live triangle that holds it.
+    faces = plan.pt_face
+    assert all(plan.tri.tri[f] is not None for f in np.unique(faces))
+
+
+def test_multiple_choice_scores_far_fewer_candidates():
+    pts, _ = otjax.datasets.star(1500, noise=0.01, seed=9)
+    mc = otjax.reconstruct_curve(pts, n_vertices=10, queue="multiple-choice", relocation=0)
+    ex = otjax.reconstruct_curve(pts, n_vertices=10, queue="exhaustive", relocation=0)
+    assert mc.history["switched_at"] == 50
+    # A step scores at most `choices` half-edges until the switch.
+    assert mc.history["scored"] < ex.history["scored"] / 3
+
+
+def test_same_seed_same_multiple_choice_result_and_seed_matters():
+    pts, _ = otjax.datasets.star(800, noise=0.01, seed=10)
+    a = otjax.reconstruct_curve(pts, n_vertices=10, queue="multiple-choice", initial_vertices=400, seed=3)
+    b = otjax.reconstruct_curve(pts, n_vertices=10, queue="multiple-choice", initial_vertices=400, seed=3)
+    c = otjax.reconstruct_curve(pts, n_vertices=10, queue="multiple-choice", initial_vertices=400, seed=4)
+    np.testing.assert_array_equal(a.vertices, b.vertices)
+    np.testing.assert_array_equal(a.edges, b.edges)
+    assert a.total_cost == b.total_cost
+    assert not np.array_equal(a.vertices, c.vertices)  # another subset, other draws
+
+
+def test_subset_initialisation_transports_every_point():
+    rng = np.random.default_rng(11)
+    pts, _ = otjax.datasets.star(1200, noise=0.01, seed=11)
+    mass = rng.uniform(0.5, 1.5, len(pts))
+    keep = np.sort(rng.choice(len(pts), 300, replace=False))
+    plan = TransportPlan(Triangulation(pts[keep]), pts, mass)
+    decimate(plan, 10, queue="multiple-choice", seed=0)
+    edge_mass, vertex_mass = vertex_and_edge_masses(plan)
+    # Every point is sent somewhere: to a solid edge or to a vertex.
+    assert sum(edge_mass.values()) + sum(vertex_mass.values()) == pytest.approx(mass.sum(), rel=1e-12)
+    r = otjax.reconstruct_curve(pts, mass, n_vertices=10, initial_vertices=300, relocation=0,
+                                final_relocations=0)
+    assert r.params["initial_vertices"] == 300
+    assert r.history["collapses"] == 300 - 10
+
+
+@pytest.mark.parametrize("bad, message", [
+    ({"queue": "random"}, "queue"),
+    ({"choices": 0}, "choices"),
+    ({"initial_vertices": 5}, "initial_vertices"),
+    ({"initial_vertices": 2.5}, "initial_vertices"),
+])
+def test_bad_queue_parameters_are_named(bad, message):
+    pts, _ = otjax.datasets.star(200, noise=0.01)
+    with pytest.raises(ValueError, match=message):
+        otjax.reconstruct_curve(pts, n_vertices=10, **bad)
