@@ -97,7 +97,8 @@ def _check(cost_and_grad, vertices, edge_index, points, mass, point_edge, scale)
                 plus, minus = vertices.copy(), vertices.copy()
                 plus[i, k] += h
                 minus[i, k] -= h
-                fd[i, k] = (float(f(jnp.asarray(plus), *args)) - float(f(jnp.asarray(minus), *args))) / (2 * h)
+                up, down = float(f(jnp.asarray(plus), *args)), float(f(jnp.asarray(minus), *args))
+                fd[i, k] = (up - down) / (2 * h)
     assert np.all(np.isfinite(grad))
     ref = max(np.abs(fd).max(), np.abs(grad).max())
     assert ref > 0

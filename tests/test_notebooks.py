@@ -30,7 +30,8 @@ def test_committed_without_outputs(path):
     nbformat.validate(nb)
     dirty = [i for i, cell in enumerate(nb.cells)
              if cell.cell_type == "code" and (cell.get("outputs") or cell.get("execution_count") is not None)]
-    assert not dirty, f"{path.name}: cells {dirty} have outputs or execution counts; strip them before committing"
+    assert not dirty, (f"{path.name}: cells {dirty} have outputs or execution counts; "
+                       "strip them before committing")
 
 
 @pytest.mark.parametrize("path", NOTEBOOKS, ids=lambda p: p.stem)
