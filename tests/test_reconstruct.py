@@ -5,6 +5,7 @@ Each expensive reconstruction runs once per module (fixtures), and several
 tests read it.
 """
 
+import functools
 import json
 
 import jsonschema
@@ -45,10 +46,14 @@ def clean_star():
     return otjax.reconstruct_curve(pts, n_vertices=10), truth
 
 
+def noisy_star_case(**mode):
+    pts, truth = datasets.star(3000, noise=0.01, seed=2)
+    return otjax.reconstruct_curve(pts, n_vertices=10, **mode), truth
+
+
 @pytest.fixture(scope="module")
 def noisy_star():
-    pts, truth = datasets.star(3000, noise=0.01, seed=2)
-    return otjax.reconstruct_curve(pts, n_vertices=10), truth
+    return noisy_star_case()
 
 
 def test_noise_free_star_recovers_its_corners(clean_star):
@@ -62,7 +67,10 @@ def test_noise_free_star_recovers_its_corners(clean_star):
 
 
 def test_noisy_star_corners_and_hausdorff(noisy_star):
-    result, truth = noisy_star
+    check_noisy_star(*noisy_star)
+
+
+def check_noisy_star(result, truth):
     d = truth["diagonal"]
     assert_one_closed_cycle(result, 10)
     err = metrics.corner_errors(result.vertices, truth["corners"]) / d
@@ -134,15 +142,21 @@ def test_density_filter_beats_the_published_relevance_on_outliers(star_with_outl
     assert precision >= best + 0.3, f"density {precision:.3f} vs best relevance {best:.3f}"
 
 
+def junction_case(**mode):
+    pts, truth = datasets.junctions(2000, noise=0.0, seed=5)
+    return otjax.reconstruct_curve(pts, n_vertices=len(truth["corners"]), **mode), truth
+
+
 @pytest.fixture(scope="module")
 def junction_shape():
-    pts, truth = datasets.junctions(2000, noise=0.0, seed=5)
-    n = len(truth["corners"])
-    return otjax.reconstruct_curve(pts, n_vertices=n), truth
+    return junction_case()
 
 
 def test_junctions_and_open_ends(junction_shape):
-    result, truth = junction_shape
+    check_junctions(*junction_shape)
+
+
+def check_junctions(result, truth):
     d = truth["diagonal"]
     deg = np.bincount(result.edges.ravel(), minlength=len(result.vertices))
     for where, want in zip(truth["junctions"], truth["junction_degree"]):
@@ -153,22 +167,86 @@ def test_junctions_and_open_ends(junction_shape):
         assert np.any(near & (deg == 1)), f"open end {end} lost"
 
 
-@pytest.fixture(scope="module")
-def skyline_pair():
+def skyline_case(**mode):
     pts, truth = datasets.skyline(1500, noise=0.005, seed=6)
     n = len(truth["corners"]) + len(truth["ends"])
-    with_reloc = otjax.reconstruct_curve(pts, n_vertices=n, relocation=100, final_relocations=1)
-    without = otjax.reconstruct_curve(pts, n_vertices=n, relocation=0, final_relocations=0)
+    with_reloc = otjax.reconstruct_curve(pts, n_vertices=n, relocation=100, final_relocations=1, **mode)
+    without = otjax.reconstruct_curve(pts, n_vertices=n, relocation=0, final_relocations=0, **mode)
     return with_reloc, without, truth
 
 
+@pytest.fixture(scope="module")
+def skyline_pair():
+    return skyline_case()
+
+
 def test_relocation_improves_skyline_corners(skyline_pair):
-    with_reloc, without, truth = skyline_pair
+    check_skyline(*skyline_pair)
+
+
+def check_skyline(with_reloc, without, truth):
     corners = np.concatenate([truth["corners"], truth["ends"]])
     e_with = metrics.corner_errors(with_reloc.vertices, corners).mean()
     e_without = metrics.corner_errors(without.vertices, corners).mean()
     assert e_with <= 0.7 * e_without, f"with {e_with:.4g} vs without {e_without:.4g}"
     assert with_reloc.total_cost < without.total_cost
+
+
+# Issue 4: the other queues and the random-subset initialisation pass the same
+# acceptance checks. "subset" is the configuration for large inputs: the
+# multiple-choice queue on a triangulation of half of the points.
+MODES = {
+    "multiple-choice": {"queue": "multiple-choice"},
+    "subset": {"queue": "multiple-choice", "initial_vertices": "half"},
+    "parallel": {"queue": "parallel"},
+}
+
+
+def mode_args(name: str, n_points: int) -> dict:
+    args = dict(MODES[name])
+    if args.get("initial_vertices") == "half":
+        args["initial_vertices"] = n_points // 2
+    return args
+
+
+@functools.lru_cache(maxsize=None)
+def runs_in_mode(name: str) -> dict:
+    """The three acceptance cases run in one mode (star 3000, skyline 1500, X/T 2000), once."""
+    return {
+        "star": noisy_star_case(**mode_args(name, 3000)),
+        "skyline": skyline_case(**mode_args(name, 1500)),
+        "junctions": junction_case(**mode_args(name, 2000)),
+    }
+
+
+@pytest.fixture(params=list(MODES))
+def mode_runs(request):
+    return request.param, runs_in_mode(request.param)
+
+
+def test_modes_pass_the_noisy_star_acceptance(mode_runs):
+    check_noisy_star(*mode_runs[1]["star"])
+
+
+def test_modes_pass_the_skyline_acceptance(mode_runs):
+    check_skyline(*mode_runs[1]["skyline"])
+
+
+def test_modes_pass_the_junction_acceptance(mode_runs):
+    check_junctions(*mode_runs[1]["junctions"])
+
+
+def test_parallel_mode_costs_at_most_3_percent_more_in_5x_fewer_rounds(noisy_star, skyline_pair,
+                                                                       junction_shape):
+    runs = runs_in_mode("parallel")
+    sequential = {"star": noisy_star[0], "skyline": skyline_pair[0], "junctions": junction_shape[0]}
+    for case, seq in sequential.items():
+        par = runs[case][0]
+        assert par.total_cost <= 1.03 * seq.total_cost, (
+            f"{case}: parallel {par.total_cost:.6g} vs sequential {seq.total_cost:.6g}")
+        h = par.history
+        assert h["collapses"] == seq.history["collapses"]
+        assert 5 * h["rounds"] <= h["collapses"], f"{case}: {h['rounds']} rounds, {h['collapses']} collapses"
 
 
 def small_case(seed=0):

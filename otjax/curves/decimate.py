@@ -102,7 +102,7 @@ class _Scores:
     half-edges leaving ``v``; an entry scored at an older version is stale.
     """
 
-    def __init__(self, plan: TransportPlan, stats: DecimationStats, admissible):
+    def __init__(self, plan: TransportPlan, stats: DecimationStats, admissible, shuffle_ties=None):
         self.plan = plan
         self.stats = stats
         self.admissible = admissible
@@ -110,7 +110,12 @@ class _Scores:
         self.entries: dict[tuple[int, int], tuple] = {}  # key -> (delta, cand, row, version)
         self.heap: list = []
         self.use_heap = False
-        self._tie = itertools.count()
+        # Exact ties (zero-cost collapses along clean straight runs) pop in
+        # insertion order, i.e. by vertex id, i.e. along the run: neighbours
+        # first. The parallel queue wants them spread out, so it breaks ties
+        # by a seeded random key instead.
+        self._tie = itertools.count() if shuffle_ties is None else iter(
+            lambda: float(shuffle_ties.random()), None)
 
     def fresh(self, key) -> bool:
         entry = self.entries.get(key)
@@ -210,24 +215,48 @@ def _sample_half_edges(plan: TransportPlan, live: _LiveVertices, rng: np.random.
 
 
 def _lock_set(plan: TransportPlan, cand) -> set[int]:
-    """Vertices of the closed star of a collapse's source: it and its one-ring.
+    """Vertices of the closed star of a collapse's source: it and its one-ring."""
+    return {cand.plan.source, *cand.plan.ring}
 
-    Two collapses whose lock sets are disjoint are independent:
 
-    * their stars share no vertex, hence no triangle and no edge;
-    * neither source is a flap vertex of the other (a flap vertex of ``A``
-      is adjacent to two one-ring vertices of ``A``, which would then lie in
-      both lock sets), so neither star holds a face across the other's link,
-      whose points the other's stencil reads;
-    * neither changes what the other's link condition looked at: a new
-      common neighbour ``y`` of ``(s_A, w_A)`` would have to be in
-      ``ring(s_A)`` and be joined to ``w_A`` by ``B``, putting ``w_A`` in
-      ``B``'s lock set.
+class IndependentSet:
+    """Collapses of one parallel round, chosen so that they do not interact.
 
-    So the cost change of a round is the sum of its candidates' deltas
+    Two collapses ``A`` and ``B`` are independent when their lock sets (closed
+    stars, :func:`_lock_set`) share at most one vertex:
+
+    * a shared triangle or edge would put two shared vertices in both;
+    * a face across ``A``'s link that lies in ``B``'s star (its points are
+      read by ``A``'s stencil, reassigned by ``B``) has ``B``'s source as its
+      far vertex, so both ends of that link edge are in both lock sets;
+    * ``B`` joins vertices of its lock set only, so a new common neighbour
+      ``y`` of ``A``'s source and target (breaking ``A``'s link condition)
+      would put both ``y`` and ``A``'s target in both lock sets.
+
+    One shared vertex is allowed because Delaunay fans (a far vertex joined
+    to a long straight run of points) put one hub in the closed star of every
+    collapse along the run: with disjoint lock sets, only one of them could
+    go per round. The cost change of a round is then the sum of its deltas
     (tested exactly).
     """
-    return {cand.plan.source, *cand.plan.ring}
+
+    def __init__(self):
+        self.owners: dict[int, list[int]] = {}
+        self.size = 0
+
+    def admits(self, lock: set[int]) -> bool:
+        seen: set[int] = set()
+        for v in lock:
+            for a in self.owners.get(v, ()):
+                if a in seen:
+                    return False
+                seen.add(a)
+        return True
+
+    def add(self, lock: set[int]) -> None:
+        for v in lock:
+            self.owners.setdefault(v, []).append(self.size)
+        self.size += 1
 
 
 def decimate(plan: TransportPlan, n_vertices: int | None = None, *, tolerance: float | None = None,
@@ -281,7 +310,8 @@ def decimate(plan: TransportPlan, n_vertices: int | None = None, *, tolerance: f
     target = n_vertices if n_vertices is not None else 1
     stats = DecimationStats()
     tri = plan.tri
-    scores = _Scores(plan, stats, admissible)
+    rng = np.random.default_rng(seed)
+    scores = _Scores(plan, stats, admissible, rng if queue == "parallel" else None)
     live = _LiveVertices(tri)
     bar = None
     if progress:
@@ -317,7 +347,6 @@ def decimate(plan: TransportPlan, n_vertices: int | None = None, *, tolerance: f
         return dirty
 
     if queue == "multiple-choice":
-        rng = np.random.default_rng(seed)
         switch = switch_factor * target if n_vertices is not None else 0
         while len(live) > max(target, switch):
             t0 = time.perf_counter()
@@ -348,7 +377,8 @@ def decimate(plan: TransportPlan, n_vertices: int | None = None, *, tolerance: f
         stats.rounds += 1
     while len(live) > target and queue == "parallel":
         budget = max(1, int(round_fraction * (len(live) - target)))
-        chosen, locked, deferred = [], set(), []
+        chosen, deferred = [], []
+        independent = IndependentSet()
         # Only the PARALLEL_SCAN * budget cheapest candidates are considered: when the
         # cheap ones conflict, the round is smaller, rather than reaching
         # far down the queue for collapses the greedy would make much later.
@@ -357,11 +387,11 @@ def decimate(plan: TransportPlan, n_vertices: int | None = None, *, tolerance: f
             if key is None:
                 break
             lock = _lock_set(plan, scores.entries[key][1])
-            if lock & locked:
+            if not independent.admits(lock):
                 deferred.append(key)
                 continue
             chosen.append(key)
-            locked |= lock
+            independent.add(lock)
         if not chosen:
             break
         dirty: set[int] = set()
