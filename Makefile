@@ -18,6 +18,6 @@ demo: install
 		-o out/noisy-star.json
 
 test: install
-	$(BIN)/python -m pytest -q
+	$(BIN)/python -m pytest -q -n 2 --dist loadfile
 
 .PHONY: install demo test

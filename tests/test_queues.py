@@ -65,7 +65,8 @@ def test_filtered_location_over_chunk_boundaries():
     rng = np.random.default_rng(1)
     n = LARGE_CHUNK + 12_345  # one large chunk and small ones after it
     a = rng.random((n, 3, 2))
-    flip = np.cross(a[:, 1] - a[:, 0], a[:, 2] - a[:, 0]) < 0
+    u, v = a[:, 1] - a[:, 0], a[:, 2] - a[:, 0]
+    flip = u[:, 0] * v[:, 1] - u[:, 1] * v[:, 0] < 0
     a[flip] = a[flip][:, [0, 2, 1]]
     p = rng.random((n, 2))
     p[::7] = a[::7, 1]  # exactly on a corner: the perturbation decides
