@@ -16,6 +16,7 @@ import argparse
 import sys
 
 from otjax import datasets
+from otjax.curves.decimate import QUEUES
 from otjax.curves.reconstruct import reconstruct_curve
 from otjax.curves.result import SAVE_EXTENSIONS, check_save_path
 from otjax.io import IMAGE_EXTENSIONS, TEXT_EXTENSIONS, read_points
@@ -63,6 +64,13 @@ def _curve_parser(sub) -> argparse.ArgumentParser:
     p.add_argument("--relocation", type=int, metavar="K", help="relocate during the last K collapses")
     p.add_argument("--final-relocations", type=int, metavar="P", help="relocation passes at the end")
     p.add_argument("--refine", action="store_true", default=None, help="refine vertices by gradient descent")
+    p.add_argument("--queue", choices=QUEUES,
+                   help="collapse order: exhaustive (default), multiple-choice (large inputs), parallel")
+    p.add_argument("--choices", type=int, metavar="K", help="multiple-choice: half-edges drawn per step (15)")
+    p.add_argument("--initial-vertices", type=int, metavar="V",
+                   help="random subset of the points used as initial vertices (default: automatic)")
+    p.add_argument("--round-fraction", type=float, metavar="F",
+                   help="parallel: a round collapses at most this fraction of what is left (0.05)")
     p.add_argument("--seed", type=int, metavar="S", help="random seed (examples: also the sampling seed)")
     p.add_argument("--points", type=int, metavar="M", help="examples only: number of sampled points")
     p.add_argument("--invert", action="store_true", help="images only: dark drawing on light background")
@@ -125,6 +133,10 @@ def _load(args, usage) -> tuple:
         "relocation": args.relocation,
         "final_relocations": args.final_relocations,
         "refine": args.refine,
+        "queue": args.queue,
+        "choices": args.choices,
+        "initial_vertices": args.initial_vertices,
+        "round_fraction": args.round_fraction,
         "seed": args.seed,
         "merge_duplicates": args.merge_duplicates,
     }
