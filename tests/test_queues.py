@@ -18,7 +18,7 @@ from scipy import stats
 import otjax
 from otjax.curves import cost
 from otjax.curves.decimate import IndependentSet, _LiveVertices, _lock_set, _sample_half_edges, decimate
-from otjax.curves.location import LARGE_CHUNK, locate_pairs
+from otjax.curves.location import CHUNK, locate_pairs
 from otjax.curves.plan import TransportPlan
 from otjax.curves.reconstruct import vertex_and_edge_masses
 from otjax.curves.predicates import in_triangle_perturbed
@@ -63,7 +63,7 @@ def test_filtered_location_equals_the_exact_predicate(kind, n, seed):
 
 def test_filtered_location_over_chunk_boundaries():
     rng = np.random.default_rng(1)
-    n = LARGE_CHUNK + 12_345  # one large chunk and small ones after it
+    n = 5 * CHUNK + 12_345  # several chunks, the last one padded
     a = rng.random((n, 3, 2))
     u, v = a[:, 1] - a[:, 0], a[:, 2] - a[:, 0]
     flip = u[:, 0] * v[:, 1] - u[:, 1] * v[:, 0] < 0

@@ -26,9 +26,12 @@ import numpy as np
 from otjax.curves.predicates import _ORIENT_ERR, in_triangle_perturbed
 
 INSIDE, OUTSIDE, UNSURE = 1, 0, -1
-# Pairs per kernel call: two sizes, so at most two compiled shapes.
-SMALL_CHUNK = 1 << 13
-LARGE_CHUNK = 1 << 17
+# Pairs per kernel call: one size, one compiled shape. A chunk costs ~0.25 ms;
+# a small export pads to it, a large one dispatches several asynchronously.
+CHUNK = 1 << 14
+# Fewer pairs than this go straight to the host predicate (below the cost of
+# one kernel call).
+MIN_PAIRS = 512
 
 
 def _orient_perturbed_filtered(ax, ay, bx, by, px, py) -> tuple[jax.Array, jax.Array]:
@@ -91,14 +94,9 @@ def _padding(size: int) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _chunks(n: int):
-    """``(start, size)`` covering ``n`` pairs with full large chunks first."""
-    s = 0
-    while n - s >= LARGE_CHUNK:
-        yield s, LARGE_CHUNK
-        s += LARGE_CHUNK
-    while s < n:
-        yield s, SMALL_CHUNK
-        s += SMALL_CHUNK
+    """``(start, size)`` covering ``n`` pairs."""
+    for s in range(0, n, CHUNK):
+        yield s, CHUNK
 
 
 def locate_pairs(tri: np.ndarray, p: np.ndarray) -> np.ndarray:
@@ -122,7 +120,7 @@ def locate_pairs(tri: np.ndarray, p: np.ndarray) -> np.ndarray:
     def exact(idx):
         return in_triangle_perturbed(tri[:, idx].T.reshape(-1, 3, 2), p[:, idx].T)
 
-    if n < 512:  # below a kernel call's overhead
+    if n < MIN_PAIRS:
         return exact(np.arange(n))
     out = np.empty(n, np.int8)
     with jax.enable_x64(True):

@@ -25,6 +25,7 @@ import jax
 import numpy as np
 
 from otjax.curves import cost as _cost
+from otjax.curves.location import MIN_PAIRS as LOCATE_MIN_PAIRS
 from otjax.curves.location import locate_pairs
 from otjax.curves.predicates import orient_perturbed
 from otjax.curves.triangulation import CollapsePlan, Triangulation, edge_key
@@ -103,6 +104,7 @@ class TransportPlan:
         self.buckets = buckets if buckets is not None else Buckets(min_edges=64)
         self.dtype = dtype
         self.n_kernel_calls = 0
+        self.location_kernel_used = False
         self.max_source_degree = max_source_degree
         # Collapse plans depend only on the stars of their two ends: cache
         # them, stamped with per-vertex versions bumped when a star changes.
@@ -190,6 +192,11 @@ class TransportPlan:
             for i, k in enumerate(ekeys):
                 self.edge_cost[k] = float(res.edge_cost[i, 0])
                 self.edge_solid[k] = bool(res.solid[i, 0])
+
+    @property
+    def compiled_shapes(self) -> int:
+        """Distinct kernel shapes this plan has used: cost kernel and location kernel."""
+        return len(self.buckets.shapes_seen) + int(self.location_kernel_used)
 
     def solid_of(self, keys: np.ndarray) -> np.ndarray:
         """``(n,)`` bool: whether each edge key of ``keys (n, 2)`` is solid.
@@ -409,6 +416,7 @@ class TransportPlan:
         first = np.repeat(np.cumsum(reps) - reps, reps)
         pair_tri = tri_start[pt_job][pair_pt] + (np.arange(len(pair_pt)) - first)
         hold = locate_pairs(coords_rows[:, pair_tri], self._point_rows[:, inside[pair_pt]])
+        self.location_kernel_used |= len(pair_pt) >= LOCATE_MIN_PAIRS
         hit = np.flatnonzero(hold)
         # The perturbed location is a partition: exactly one triangle each.
         if len(hit) != len(inside) or np.any(pair_pt[hit] != np.arange(len(inside))):

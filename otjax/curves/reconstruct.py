@@ -165,7 +165,7 @@ def reconstruct_curve(points, masses=None, n_vertices: int | None = None, *,
     result.history = {"collapses": stats.collapses, "relocations": moved, "scored": stats.scored,
                       "kernel_calls": plan.n_kernel_calls, "seconds": timings,
                       "rounds": stats.rounds, "switched_at": stats.switched_at,
-                      "compiled_shapes": len(plan.buckets.shapes_seen),
+                      "compiled_shapes": plan.compiled_shapes,
                       "refine": refined}
     return result
 
