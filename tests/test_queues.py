@@ -154,7 +154,7 @@ def independent_round(plan):
     delta, rows_ = plan.score(cands)
     chosen, independent = [], IndependentSet()
     for i in np.argsort(delta, kind="stable"):
-        lock = _lock_set(plan, cands[i])
+        lock = _lock_set(plan, cands[i].plan.source)
         if independent.admits(lock):
             chosen.append(i)
             independent.add(lock)

@@ -107,7 +107,13 @@ class _Scores:
         self.stats = stats
         self.admissible = admissible
         self.version = [0] * len(plan.tri.xy)
-        self.entries: dict[tuple[int, int], tuple] = {}  # key -> (delta, cand, row, version)
+        # The queue keeps scores only. A stencil holds every point of a star
+        # (late in a run, thousands): keeping the stencils of every scored
+        # half-edge took 1.9 GB at 200k points. The stencils of the latest
+        # scoring call stay at hand ("hot"), because the winner is usually
+        # among them; any other winner is exported again when it is applied.
+        self.entries: dict[tuple[int, int], tuple[float, int]] = {}  # key -> (delta, version)
+        self.hot: dict[tuple[int, int], tuple] = {}  # key -> (candidate, row, version)
         self.heap: list = []
         self.use_heap = False
         # Exact ties (zero-cost collapses along clean straight runs) pop in
@@ -119,10 +125,10 @@ class _Scores:
 
     def fresh(self, key) -> bool:
         entry = self.entries.get(key)
-        return entry is not None and entry[3] == self.version[key[0]]
+        return entry is not None and entry[1] == self.version[key[0]]
 
     def push(self, key) -> None:
-        delta, _, _, ver = self.entries[key]
+        delta, ver = self.entries[key]
         heapq.heappush(self.heap, (delta, next(self._tie), key, ver))
 
     def pop(self):
@@ -130,32 +136,64 @@ class _Scores:
         while self.heap:
             _, _, key, ver = heapq.heappop(self.heap)
             entry = self.entries.get(key)
-            if entry is None or entry[3] != ver or ver != self.version[key[0]]:
+            if entry is None or entry[1] != ver or ver != self.version[key[0]]:
                 continue
             if not self.plan.tri.alive[key[0]]:
                 continue
             return key
         return None
 
-    def rescore(self, sources, targets: dict | None = None) -> None:
+    def _score(self, cands):
+        t1 = time.perf_counter()
+        delta, rows = self.plan.score(cands)
+        self.stats.seconds["score"] += time.perf_counter() - t1
+        self.stats.scored += len(cands)
+        return delta, rows
+
+    def rescore(self, sources, targets: dict | None = None, keep_hot: bool = True) -> None:
         """Exports and scores the half-edges leaving ``sources`` (see
         :meth:`TransportPlan.candidates`), in chunks bounded in points."""
         plan = self.plan
+        self.hot = {}
         for chunk in plan.source_chunks(sorted(sources), EXPORT_PAIR_BUDGET):
             t0 = time.perf_counter()
             cands = plan.candidates(chunk, targets)
-            t1 = time.perf_counter()
-            delta, rows = plan.score(cands)
-            self.stats.seconds["export"] += t1 - t0
-            self.stats.seconds["score"] += time.perf_counter() - t1
-            self.stats.scored += len(cands)
+            self.stats.seconds["export"] += time.perf_counter() - t0
+            delta, rows = self._score(cands)
             for c, d, r in zip(cands, delta, rows):
                 if self.admissible is not None and not self.admissible(c, *r):
                     continue
                 key = (c.plan.source, c.plan.target)
-                self.entries[key] = (float(d), c, r, self.version[key[0]])
+                ver = self.version[key[0]]
+                self.entries[key] = (float(d), ver)
+                if keep_hot:
+                    self.hot[key] = (c, r, ver)
                 if self.use_heap:
                     self.push(key)
+
+    def take(self, keys) -> list[tuple]:
+        """``(candidate, row)`` of fresh entries, exporting again what is not hot.
+
+        The entries leave the queue. A re-export of a fresh entry is the same
+        stencil (nothing around it changed), scored again in one batch.
+        """
+        out: dict = {}
+        again: dict[int, list[int]] = {}
+        for key in keys:
+            h = self.hot.pop(key, None)
+            if h is not None and h[2] == self.version[key[0]]:
+                out[key] = h[:2]
+            else:
+                again.setdefault(key[0], []).append(key[1])
+            self.entries.pop(key, None)
+        if again:
+            t0 = time.perf_counter()
+            cands = self.plan.candidates(sorted(again), again)
+            self.stats.seconds["export"] += time.perf_counter() - t0
+            _, rows = self._score(cands)
+            for c, r in zip(cands, rows):
+                out[(c.plan.source, c.plan.target)] = (c, r)
+        return [out[key] for key in keys]
 
     def bump(self, vertices) -> None:
         for v in vertices:
@@ -214,9 +252,9 @@ def _sample_half_edges(plan: TransportPlan, live: _LiveVertices, rng: np.random.
     return list(out)
 
 
-def _lock_set(plan: TransportPlan, cand) -> set[int]:
+def _lock_set(plan: TransportPlan, source: int) -> set[int]:
     """Vertices of the closed star of a collapse's source: it and its one-ring."""
-    return {cand.plan.source, *cand.plan.ring}
+    return {source, *plan.tri.star(source)[0]}
 
 
 class IndependentSet:
@@ -323,9 +361,9 @@ def decimate(plan: TransportPlan, n_vertices: int | None = None, *, tolerance: f
     def relocating() -> bool:
         return relocation > 0 and n_vertices is not None and len(live) - target < relocation
 
-    def collapse(key, relocate_ring: bool = True) -> set[int]:
+    def collapse(key, taken=None, relocate_ring: bool = True) -> set[int]:
         """Applies the scored collapse ``key``; returns its dirty vertices."""
-        _, cand, row, _ = scores.entries.pop(key)
+        cand, row = taken if taken is not None else scores.take([key])[0]
         t0 = time.perf_counter()
         dirty = plan.apply(cand, row)
         stats.seconds["apply"] += time.perf_counter() - t0
@@ -368,7 +406,7 @@ def decimate(plan: TransportPlan, n_vertices: int | None = None, *, tolerance: f
     if len(live) > target:
         # The multiple-choice phase scored only what it drew: score it all.
         scores.use_heap = True
-        scores.rescore(live.ids)
+        scores.rescore(live.ids, keep_hot=False)
     while len(live) > target and queue != "parallel":
         key = scores.pop()
         if key is None:
@@ -386,7 +424,7 @@ def decimate(plan: TransportPlan, n_vertices: int | None = None, *, tolerance: f
             key = scores.pop()
             if key is None:
                 break
-            lock = _lock_set(plan, scores.entries[key][1])
+            lock = _lock_set(plan, key[0])
             if not independent.admits(lock):
                 deferred.append(key)
                 continue
@@ -396,16 +434,16 @@ def decimate(plan: TransportPlan, n_vertices: int | None = None, *, tolerance: f
             break
         dirty: set[int] = set()
         rings: set[int] = set()
-        for key in chosen:
-            rings.update(scores.entries[key][1].plan.ring)
-            dirty |= collapse(key, relocate_ring=False)
+        for key, taken in zip(chosen, scores.take(chosen)):
+            rings.update(taken[0].plan.ring)
+            dirty |= collapse(key, taken, relocate_ring=False)
         # Relocation waits for the round: a move reaches past the lock set.
         if relocating():
             dirty |= relocate_vertices(rings)
         for key in deferred:
             if scores.fresh(key) and tri.alive[key[0]]:
                 scores.push(key)
-        scores.rescore({v for v in dirty if tri.alive[v]})
+        scores.rescore({v for v in dirty if tri.alive[v]}, keep_hot=False)
         stats.rounds += 1
     if bar is not None:
         bar.close()
