@@ -35,8 +35,10 @@ from otjax.curves.plan import TransportPlan
 from otjax.curves.relocation import relocate
 
 QUEUES = ("exhaustive", "multiple-choice", "parallel")
-# Bound on the (point, new triangle) pairs of one export: ~100 bytes each.
-EXPORT_PAIR_BUDGET = 2_000_000
+# Bound on the (point, new triangle) pairs of one export (~100 bytes each).
+# Small enough that exports come in several chunks, each exported while the
+# previous one is scored (measured 50k points: 28.7 s with 2M, 27.6 s).
+EXPORT_PAIR_BUDGET = 300_000
 # Parallel rounds look at most this many times their budget down the queue.
 PARALLEL_SCAN = 2
 
@@ -155,11 +157,13 @@ class _Scores:
         :meth:`TransportPlan.candidates`), in chunks bounded in points."""
         plan = self.plan
         self.hot = {}
-        for chunk in plan.source_chunks(sorted(sources), EXPORT_PAIR_BUDGET):
-            t0 = time.perf_counter()
-            cands = plan.candidates(chunk, targets)
-            self.stats.seconds["export"] += time.perf_counter() - t0
-            delta, rows = self._score(cands)
+        in_flight = None
+
+        def settle(cands, pending):
+            t1 = time.perf_counter()
+            delta, rows = plan.collect(cands, pending)
+            self.stats.seconds["score"] += time.perf_counter() - t1
+            self.stats.scored += len(cands)
             for c, d, r in zip(cands, delta, rows):
                 if self.admissible is not None and not self.admissible(c, *r):
                     continue
@@ -170,6 +174,20 @@ class _Scores:
                     self.hot[key] = (c, r, ver)
                 if self.use_heap:
                     self.push(key)
+
+        # A chunk's kernels run while the next chunk is exported.
+        for chunk in plan.source_chunks(sorted(sources), EXPORT_PAIR_BUDGET):
+            t0 = time.perf_counter()
+            cands = plan.candidates(chunk, targets)
+            t1 = time.perf_counter()
+            pending = plan.dispatch(cands)
+            self.stats.seconds["export"] += t1 - t0
+            self.stats.seconds["score"] += time.perf_counter() - t1
+            if in_flight is not None:
+                settle(*in_flight)
+            in_flight = (cands, pending)
+        if in_flight is not None:
+            settle(*in_flight)
 
     def take(self, keys) -> list[tuple]:
         """``(candidate, row)`` of fresh entries, exporting again what is not hot.

@@ -494,29 +494,47 @@ class TransportPlan:
         cand[r, c] = np.concatenate([x.cand for x in cands])
         return EdgeStencil(edges, edge_mask, points, mass, point_mask, cand)
 
+    def dispatch(self, cands: list[CandidateStencil]) -> list:
+        """Packs and dispatches the batches of ``cands``; does not wait.
+
+        The kernel of one batch runs while the next is packed (and, in the
+        decimation loop, while the next chunk is exported): on two cores the
+        host and XLA work side by side. :meth:`collect` gathers the results.
+        """
+        if not cands:
+            return []
+        # Grow first: every batch then has the same edge capacity.
+        self.buckets.grow(max(len(c.keys) for c in cands))
+        pending = []
+        for batch in self.buckets.batches([len(c.point_ids) for c in cands]):
+            packed = self.pack([cands[i] for i in batch])
+            self.n_kernel_calls += 1
+            with jax.enable_x64(self.dtype == np.float64):
+                pending.append((batch, _cost.batched_stencil_cost_async(packed)))
+        return pending
+
+    def collect(self, cands: list[CandidateStencil], pending: list) -> tuple[np.ndarray, list]:
+        """Results of :meth:`dispatch`: see :meth:`score`."""
+        delta = np.zeros(len(cands))
+        rows: list = [None] * len(cands)
+        for batch, handle in pending:
+            res = _cost.stencil_cost_to_host(handle)
+            delta[batch] = np.asarray(res.total[: len(batch)]) - np.array([cands[i].before for i in batch])
+            for r, i in enumerate(batch):
+                rows[i] = (res, r)
+        return delta, rows
+
     def score(self, cands: list[CandidateStencil]) -> tuple[np.ndarray, list[tuple[object, int]]]:
         """Cost increase ``delta`` of each candidate, batched.
 
         Candidates are scored in as few kernel calls as the bucket capacities
-        allow (one, for the dirty region of a single collapse).
+        allow (see :meth:`Buckets.batches`).
 
         Returns:
           ``(delta (len(cands),), rows)``; ``rows[i] = (result, r)`` locates
           candidate ``i`` in a kernel result, to pass to :meth:`apply`.
         """
-        delta = np.zeros(len(cands))
-        rows: list = [None] * len(cands)
-        if not cands:
-            return delta, rows
-        # Grow first: every batch then has the same edge capacity.
-        self.buckets.grow(max(len(c.keys) for c in cands))
-        for batch in self.buckets.batches([len(c.point_ids) for c in cands]):
-            chunk = [cands[i] for i in batch]
-            res = self.evaluate(self.pack(chunk))
-            delta[batch] = np.asarray(res.total[: len(chunk)]) - np.array([c.before for c in chunk])
-            for r, i in enumerate(batch):
-                rows[i] = (res, r)
-        return delta, rows
+        return self.collect(cands, self.dispatch(cands))
 
     # ------------------------------------------------------------- mutation
     def apply(self, cand: CandidateStencil, scored: tuple[object, int]) -> set[int]:
