@@ -8,6 +8,7 @@ compilation and reports its own peak resident memory, as a user's would.
     python scripts/bench_curves.py                          # every size, every queue
     python scripts/bench_curves.py --sizes 1000 --repeats 1 --json out.json
     python scripts/bench_curves.py --queues multiple-choice --plot docs/bench_curves.png
+    python scripts/bench_curves.py --from-json docs/bench/*.json --plot docs/bench/time_vs_n.png
 
 Prints a table and the fit ``time ~ n^k`` between 10k and 1M points, and writes
 JSON (``--json``). Runs of sizes up to ``--median-up-to`` are repeated
@@ -175,7 +176,17 @@ def main(argv=None) -> int:
     ap.add_argument("--timeout", type=float, default=1800.0, help="seconds per run")
     ap.add_argument("--json", type=Path, help="write the rows here")
     ap.add_argument("--plot", type=Path, help="write a log-log plot of time vs n here")
+    ap.add_argument("--from-json", type=Path, nargs="+", metavar="JSON",
+                    help="run nothing: merge these earlier outputs, print the table and fits, plot")
     args = ap.parse_args(argv)
+    if args.from_json:
+        try:
+            docs = [json.loads(p.read_text()) for p in args.from_json]
+        except (OSError, ValueError) as err:
+            ap.error(f"cannot read a benchmark JSON: {err}")
+        rows = sorted((r for d in docs for r in d["rows"]), key=lambda r: (r["n"], QUEUES.index(r["queue"])))
+        report(rows, sorted({r["queue"] for r in rows}, key=QUEUES.index), docs[0].get("machine"), args)
+        return 0
     if any(n < 100 for n in args.sizes) or args.repeats < 1:
         ap.error("sizes must be >= 100 and repeats >= 1")
     rows = []
@@ -189,22 +200,27 @@ def main(argv=None) -> int:
             rows.append(row)
             print(table([row]).splitlines()[-1], flush=True)
     print()
-    print(f"machine: {platform.machine()}, {os.cpu_count()} cores, {platform.platform()}")
+    report(rows, args.queues, {"platform": platform.platform(), "cores": os.cpu_count()}, args)
+    return 0 if all("seconds" in r for r in rows) else 1
+
+
+def report(rows: list[dict], queues, machine: dict | None, args) -> None:
+    """Prints the table and the fits; writes the JSON and the plot if asked."""
+    if machine:
+        print(f"machine: {machine.get('cores')} cores, {machine.get('platform')}")
     print(table(rows))
-    fits = {q: fit_exponent([r for r in rows if r.get("queue") == q]) for q in args.queues}
+    fits = {q: fit_exponent([r for r in rows if r.get("queue") == q]) for q in queues}
     for q, k in fits.items():
         if k is not None:
             print(f"fit {q}: time ~ n^{k:.2f} between 10k and 1M points")
     if args.json:
-        payload = {"machine": {"platform": platform.platform(), "cores": os.cpu_count()},
-                   "rows": rows, "fit_10k_1M": fits}
+        payload = {"machine": machine, "rows": rows, "fit_10k_1M": fits}
         args.json.parent.mkdir(parents=True, exist_ok=True)
         tmp = args.json.with_suffix(".tmp")
         tmp.write_text(json.dumps(payload, indent=1))
         os.replace(tmp, args.json)
     if args.plot:
         plot(rows, args.plot)
-    return 0 if all("seconds" in r for r in rows) else 1
 
 
 if __name__ == "__main__":
