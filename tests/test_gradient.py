@@ -65,7 +65,7 @@ def _configuration(seed, n_vertices, n_edges, n_points):
     pairs = np.array([(i, j) for i in range(n_vertices) for j in range(i + 1, n_vertices)])
     edge_index = pairs[rng.choice(len(pairs), size=min(n_edges, len(pairs)), replace=False)]
     edge_index = np.concatenate([edge_index, np.repeat(edge_index[:1], E - len(edge_index), 0)])
-    point_edge = rng.integers(0, n_edges if n_edges <= len(pairs) else len(pairs), P)
+    point_edge = rng.integers(0, min(n_edges, len(pairs)), P)
     # Points along their edge (some beyond the ends), off the line by a noise
     # that is sometimes small (solid edges) and sometimes large (ghosts).
     a, b = vertices[edge_index[point_edge, 0]], vertices[edge_index[point_edge, 1]]

@@ -20,8 +20,8 @@ from otjax.curves import cost
 from otjax.curves.decimate import IndependentSet, _LiveVertices, _lock_set, _sample_half_edges, decimate
 from otjax.curves.location import CHUNK, locate_pairs
 from otjax.curves.plan import TransportPlan
-from otjax.curves.reconstruct import vertex_and_edge_masses
 from otjax.curves.predicates import in_triangle_perturbed
+from otjax.curves.reconstruct import vertex_and_edge_masses
 from otjax.curves.triangulation import Triangulation
 from otjax.stencil import Buckets, pack_edge_stencils
 from tests.point_sets import make_points
@@ -136,13 +136,11 @@ def test_sampled_half_edges_are_uniform_and_eligible():
     everything = eligible_half_edges(plan)
     live = _LiveVertices(plan.tri)
     counts = Counter()
-    draws = 0
     for _ in range(3000):
         got = _sample_half_edges(plan, live, rng, 3)
         assert len(set(got)) == len(got) == 3
         assert set(got) <= set(everything)
         counts.update(got[:1])  # the first draw of each sample is one uniform draw
-        draws += 1
     observed = np.array([counts[h] for h in everything])
     assert stats.chisquare(observed).pvalue > 1e-3, "first draws are not uniform over half-edges"
 

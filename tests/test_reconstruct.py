@@ -209,7 +209,7 @@ def mode_args(name: str, n_points: int) -> dict:
     return args
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def runs_in_mode(name: str) -> dict:
     """The three acceptance cases run in one mode (star 3000, skyline 1500, X/T 2000), once."""
     return {

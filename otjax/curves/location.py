@@ -85,7 +85,7 @@ def in_triangle_filtered(tri: jax.Array, p: jax.Array) -> jax.Array:
     return jnp.where(n0 | n1 | n2, OUTSIDE, jnp.where(p0 & p1 & p2, INSIDE, UNSURE)).astype(jnp.int8)
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _padding(size: int) -> tuple[np.ndarray, np.ndarray]:
     # A padded pair: a unit triangle and a point outside it (never read).
     tri = np.zeros((6, size))

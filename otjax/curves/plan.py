@@ -31,7 +31,6 @@ from otjax.curves.predicates import orient_perturbed
 from otjax.curves.triangulation import CollapsePlan, Triangulation, edge_key
 from otjax.stencil import Buckets, EdgeStencil, pack_edge_stencils
 
-
 _NO_IDS = np.zeros(0, np.int64)
 
 
