@@ -11,6 +11,8 @@ only the normal part for a frozen assignment and can, rarely, raise the total.
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 
 from otjax.curves.plan import TransportPlan
@@ -115,21 +117,12 @@ def relocate(plan: TransportPlan, vertices, admissible=None) -> tuple[set[int], 
     return dirty, moved
 
 
-def minimize_lbfgs(fun, x0, maxiter: int = 100, tol: float = 1e-10):
-    """Minimises ``fun`` from ``x0`` with L-BFGS; the one place otjax calls jaxopt.
+@functools.cache
+def _lbfgs(fun, maxiter: int, tol: float):
+    """Jitted ``(init_state, update)`` of a jaxopt L-BFGS for ``fun``, built once.
 
-    jaxopt works with current JAX but is no longer maintained; replacing it
-    (e.g. by optax's L-BFGS) means replacing this function only.
-
-    Args:
-      fun: scalar JAX function of an array shaped like ``x0``.
-      x0: starting point.
-      maxiter: iteration limit.
-      tol: stop when the gradient norm falls below it.
-
-    Returns:
-      ``(x, values)``: the final point and the objective after each
-      iteration (``values[0]`` at ``x0``).
+    A solver made per call (with a closure as ``fun``) is a new function to
+    ``jax.jit`` every time: each refinement recompiled, 3-10 s on CPU.
     """
     import warnings
 
@@ -140,16 +133,44 @@ def minimize_lbfgs(fun, x0, maxiter: int = 100, tol: float = 1e-10):
         import jaxopt
 
     solver = jaxopt.LBFGS(fun=fun, maxiter=maxiter, tol=tol)
-    state = solver.init_state(x0)
-    update = jax.jit(solver.update)
+    return jax.jit(solver.init_state), jax.jit(solver.update)
+
+
+def minimize_lbfgs(fun, x0, maxiter: int = 100, tol: float = 1e-10, args: tuple = ()):
+    """Minimises ``fun`` from ``x0`` with L-BFGS; the one place otjax calls jaxopt.
+
+    jaxopt works with current JAX but is no longer maintained; replacing it
+    (e.g. by optax's L-BFGS) means replacing this function only.
+
+    Args:
+      fun: scalar JAX function ``fun(x, *args)``. Pass data through ``args``
+        rather than closing over it: the compiled solver is cached per
+        ``fun`` (and shapes), so a module-level ``fun`` compiles once.
+      x0: starting point.
+      maxiter: iteration limit.
+      tol: stop when the gradient norm falls below it.
+      args: extra arguments of ``fun``.
+
+    Returns:
+      ``(x, values)``: the final point and the objective after each
+      iteration (``values[0]`` at ``x0``).
+    """
+    init, update = _lbfgs(fun, maxiter, tol)
+    state = init(x0, *args)
     x = x0
-    values = [float(fun(x0))]
+    values = [float(state.value)]
     for _ in range(maxiter):
-        x, state = update(x, state)
+        x, state = update(x, state, *args)
         values.append(float(state.value))
         if float(state.error) <= tol:
             break
     return x, values
+
+
+def _refine_objective(x, base, free, edge_index, points, mass, point_edge):
+    from otjax.curves.cost import fixed_assignment_cost
+
+    return fixed_assignment_cost(base.at[free].set(x), edge_index, points, mass, point_edge)
 
 
 def refine(plan: TransportPlan, maxiter: int = 100, max_halvings: int = 6) -> tuple[TransportPlan, dict]:
@@ -175,7 +196,6 @@ def refine(plan: TransportPlan, maxiter: int = 100, max_halvings: int = 6) -> tu
     import jax
     import jax.numpy as jnp
 
-    from otjax.curves.cost import fixed_assignment_cost
 
     tri = plan.tri
     nv = len(tri.xy)
@@ -191,10 +211,9 @@ def refine(plan: TransportPlan, maxiter: int = 100, max_halvings: int = 6) -> tu
     with jax.enable_x64(True):
         base = jnp.asarray(v0)
 
-        def objective(x):
-            return fixed_assignment_cost(base.at[free].set(x), edge_index, plan.points, plan.mass, point_edge)
-
-        x, values = minimize_lbfgs(objective, jnp.asarray(v0[free]), maxiter=maxiter)
+        data = (base, jnp.asarray(free), jnp.asarray(edge_index), jnp.asarray(plan.points),
+                jnp.asarray(plan.mass), jnp.asarray(point_edge))
+        x, values = minimize_lbfgs(_refine_objective, jnp.asarray(v0[free]), maxiter=maxiter, args=data)
         x = np.asarray(x)
     info["values"] = values
     # The nearest-edge reassignment can undo part of the gain (a point that
