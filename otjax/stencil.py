@@ -154,6 +154,64 @@ class Buckets:
         return shape
 
 
+def ragged_index(lengths) -> tuple[np.ndarray, np.ndarray]:
+    """Row and column of every element of ragged rows laid end to end.
+
+    Args:
+      lengths: ``(R,)`` non-negative row lengths.
+
+    Returns:
+      ``(row, col)``, each ``(sum(lengths),)`` int64: element ``k`` of the
+      concatenation is ``col[k]``-th of row ``row[k]``.
+
+    Example:
+      >>> ragged_index([2, 0, 3])
+      (array([0, 0, 2, 2, 2]), array([0, 1, 0, 1, 2]))
+    """
+    lengths = np.asarray(lengths, np.int64)
+    row = np.repeat(np.arange(len(lengths)), lengths)
+    col = np.arange(int(lengths.sum())) - np.repeat(np.cumsum(lengths) - lengths, lengths)
+    return row, col
+
+
+def pack_ragged(edges, n_edges, points, mass, cand, n_points, buckets: Buckets, dtype=np.float64) -> EdgeStencil:
+    """Pads stencils given end to end into one :class:`EdgeStencil` batch.
+
+    One scatter per field, whatever the number of stencils (a Python loop
+    over candidates cost ~30 us each in the decimation loop).
+
+    Args:
+      edges: ``(sum E_i, 2, 2)`` local edges of every stencil, in order.
+      n_edges: ``(S,)`` local edge count ``E_i`` of each stencil.
+      points, mass, cand: ``(sum P_i, 2)``, ``(sum P_i,)``, ``(sum P_i, 3)``.
+      n_points: ``(S,)`` point count ``P_i`` of each stencil.
+      buckets: capacity policy; grown if a stencil does not fit.
+      dtype: float dtype of coordinates and masses.
+
+    Returns:
+      A batch whose first ``S`` rows hold the stencils in order; the
+      remaining rows are empty (all-masked) padding.
+    """
+    n_edges, n_points = np.asarray(n_edges, np.int64), np.asarray(n_points, np.int64)
+    b_cap, e_cap, p_cap = buckets.fit(len(n_edges), max(int(n_edges.max(initial=0)), 1),
+                                      max(int(n_points.max(initial=0)), 1))
+    out_edges = np.zeros((b_cap, e_cap, 2, 2), dtype)
+    edge_mask = np.zeros((b_cap, e_cap), bool)
+    r, c = ragged_index(n_edges)
+    out_edges[r, c] = edges
+    edge_mask[r, c] = True
+    out_points = np.zeros((b_cap, p_cap, 2), dtype)
+    out_mass = np.zeros((b_cap, p_cap), dtype)
+    point_mask = np.zeros((b_cap, p_cap), bool)
+    out_cand = np.zeros((b_cap, p_cap, 3), np.int32)
+    r, c = ragged_index(n_points)
+    out_points[r, c] = points
+    out_mass[r, c] = mass
+    point_mask[r, c] = True
+    out_cand[r, c] = cand
+    return EdgeStencil(out_edges, edge_mask, out_points, out_mass, point_mask, out_cand)
+
+
 def pack_edge_stencils(
     stencils: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]],
     buckets: Buckets,
@@ -171,22 +229,9 @@ def pack_edge_stencils(
       A batch whose first ``len(stencils)`` rows hold the stencils in order;
       the remaining rows are empty (all-masked) padding.
     """
-    n = len(stencils)
-    max_e = max((len(s[0]) for s in stencils), default=1)
-    max_p = max((len(s[1]) for s in stencils), default=1)
-    b_cap, e_cap, p_cap = buckets.fit(n, max(max_e, 1), max(max_p, 1))
-    edges = np.zeros((b_cap, e_cap, 2, 2), dtype)
-    edge_mask = np.zeros((b_cap, e_cap), bool)
-    points = np.zeros((b_cap, p_cap, 2), dtype)
-    mass = np.zeros((b_cap, p_cap), dtype)
-    point_mask = np.zeros((b_cap, p_cap), bool)
-    cand = np.zeros((b_cap, p_cap, 3), np.int32)
-    for i, (e, p, m, c) in enumerate(stencils):
-        ne, npt = len(e), len(p)
-        edges[i, :ne] = e
-        edge_mask[i, :ne] = True
-        points[i, :npt] = p
-        mass[i, :npt] = m
-        point_mask[i, :npt] = True
-        cand[i, :npt] = c
-    return EdgeStencil(edges, edge_mask, points, mass, point_mask, cand)
+    def cat(i, shape):
+        parts = [np.asarray(s[i]).reshape((-1,) + shape) for s in stencils]
+        return np.concatenate(parts) if parts else np.zeros((0,) + shape)
+
+    return pack_ragged(cat(0, (2, 2)), [len(s[0]) for s in stencils], cat(1, (2,)), cat(2, ()),
+                       cat(3, (3,)), [len(s[1]) for s in stencils], buckets, dtype)

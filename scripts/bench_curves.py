@@ -42,7 +42,7 @@ def make_input(n: int, seed: int):
     """``(points, truth)``: the noisy star with uniform outliers, ``n`` points."""
     from otjax import datasets
 
-    n_out = int(round(OUTLIER_FRACTION * n))
+    n_out = round(OUTLIER_FRACTION * n)
     pts, truth = datasets.star(n - n_out, noise=0.01, seed=seed)
     return datasets.with_outliers(pts, truth, n_out, seed=seed + 1)
 

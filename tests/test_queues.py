@@ -88,15 +88,33 @@ def test_packed_kernel_equals_the_plain_kernel():
         np.testing.assert_array_equal(getattr(host, name), getattr(plain, name), err_msg=name)
 
 
-def test_vectorised_pack_equals_the_reference_packer():
+def loop_pack(stencils, shape, dtype=np.float64):
+    """Reference packer: one row at a time (the pre-issue-4 implementation)."""
+    b_cap, e_cap, p_cap = shape
+    edges = np.zeros((b_cap, e_cap, 2, 2), dtype)
+    edge_mask = np.zeros((b_cap, e_cap), bool)
+    points = np.zeros((b_cap, p_cap, 2), dtype)
+    mass = np.zeros((b_cap, p_cap), dtype)
+    point_mask = np.zeros((b_cap, p_cap), bool)
+    cand = np.zeros((b_cap, p_cap, 3), np.int32)
+    for i, (e, p, m, c) in enumerate(stencils):
+        edges[i, :len(e)] = e
+        edge_mask[i, :len(e)] = True
+        points[i, :len(p)] = p
+        mass[i, :len(p)] = m
+        point_mask[i, :len(p)] = True
+        cand[i, :len(p)] = c
+    return edges, edge_mask, points, mass, point_mask, cand
+
+
+def test_vectorised_packing_equals_a_row_by_row_reference():
     plan = make_plan(np.random.default_rng(3))
     cands = plan.candidates(np.nonzero(plan.tri.alive & ~plan.tri.pinned)[0][:3].tolist())[:5]
-    got = plan.pack(cands)
-    want = pack_edge_stencils(
-        [(c.edges, plan.points[c.point_ids], plan.mass[c.point_ids], c.cand) for c in cands],
-        plan.buckets, plan.dtype)
-    for name in got._fields:
-        np.testing.assert_array_equal(getattr(got, name), getattr(want, name), err_msg=name)
+    stencils = [(c.edges, plan.points[c.point_ids], plan.mass[c.point_ids], c.cand) for c in cands]
+    for got in (plan.pack(cands), pack_edge_stencils(stencils, plan.buckets, plan.dtype)):
+        want = loop_pack(stencils, got.shape)
+        for name, w in zip(got._fields, want):
+            np.testing.assert_array_equal(getattr(got, name), w, err_msg=name)
 
 
 @given(st.lists(st.integers(1, 40_000), min_size=1, max_size=200))

@@ -93,12 +93,6 @@ def _padding(size: int) -> tuple[np.ndarray, np.ndarray]:
     return tri, np.full((2, size), 2.0)
 
 
-def _chunks(n: int):
-    """``(start, size)`` covering ``n`` pairs."""
-    for s in range(0, n, CHUNK):
-        yield s, CHUNK
-
-
 def locate_pairs(tri: np.ndarray, p: np.ndarray) -> np.ndarray:
     """Exact perturbed point-in-triangle test for many pairs.
 
@@ -125,10 +119,10 @@ def locate_pairs(tri: np.ndarray, p: np.ndarray) -> np.ndarray:
     out = np.empty(n, np.int8)
     with jax.enable_x64(True):
         pending = []
-        for s, size in _chunks(n):
-            t, q = tri[:, s:s + size], p[:, s:s + size]
-            if q.shape[1] < size:
-                pad_t, pad_q = _padding(size)
+        for s in range(0, n, CHUNK):
+            t, q = tri[:, s:s + CHUNK], p[:, s:s + CHUNK]
+            if q.shape[1] < CHUNK:
+                pad_t, pad_q = _padding(CHUNK)
                 t = np.concatenate([t, pad_t[:, q.shape[1]:]], 1)
                 q = np.concatenate([q, pad_q[:, q.shape[1]:]], 1)
             pending.append((s, in_triangle_filtered(t, q)))  # dispatched asynchronously

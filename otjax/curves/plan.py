@@ -29,7 +29,7 @@ from otjax.curves.location import MIN_PAIRS as LOCATE_MIN_PAIRS
 from otjax.curves.location import locate_pairs
 from otjax.curves.predicates import orient_perturbed
 from otjax.curves.triangulation import CollapsePlan, Triangulation, edge_key
-from otjax.stencil import Buckets, EdgeStencil, pack_edge_stencils
+from otjax.stencil import Buckets, EdgeStencil, pack_edge_stencils, pack_ragged, ragged_index
 
 _NO_IDS = np.zeros(0, np.int64)
 
@@ -470,9 +470,9 @@ class TransportPlan:
         n_flip = np.fromiter((len(job[0].flipped_out) for job in jobs), np.int64, nj)
         fan_start = tri_start[:-1] + n_flip
         n_fan = n_tri - n_flip
-        fan_job = np.repeat(np.arange(nj), n_fan)
         fan_off = np.concatenate([[0], np.cumsum(n_fan)])
-        fans = fan_start[fan_job] + (np.arange(int(n_fan.sum())) - fan_off[fan_job])
+        fan_job, k = ragged_index(n_fan)
+        fans = fan_start[fan_job] + k
         apex = coords[fan_start, 0]  # (nj, 2): fan triangles are (apex, a, b)
         first = coords[fan_start, 1] - apex
         theta0 = np.arctan2(first[:, 1], first[:, 0])
@@ -490,10 +490,8 @@ class TransportPlan:
         rest = np.flatnonzero(~ok)
         if len(rest):
             job = pt_job[rest]
-            reps = n_tri[job]
-            pair_pt = np.repeat(np.arange(len(rest)), reps)
-            start = np.repeat(np.cumsum(reps) - reps, reps)
-            pair_tri = tri_start[job][pair_pt] + (np.arange(len(pair_pt)) - start)
+            pair_pt, k = ragged_index(n_tri[job])
+            pair_tri = tri_start[job][pair_pt] + k
             hold = locate_pairs(coords_rows[:, pair_tri], self._point_rows[:, inside[rest[pair_pt]]])
             self.location_kernel_used |= len(pair_pt) >= LOCATE_MIN_PAIRS
             hit = np.flatnonzero(hold)
@@ -506,35 +504,12 @@ class TransportPlan:
     def pack(self, cands: list[CandidateStencil]) -> EdgeStencil:
         """Pads candidate stencils into one batch (see :class:`Buckets`).
 
-        Same result as :func:`otjax.stencil.pack_edge_stencils`, written with
-        one scatter per field over all candidates instead of a Python loop.
+        The points and masses of all candidates are gathered in one go.
         """
-        n_e = np.fromiter((len(c.keys) for c in cands), np.int64, len(cands))
-        n_p = np.fromiter((len(c.point_ids) for c in cands), np.int64, len(cands))
-        b_cap, e_cap, p_cap = self.buckets.fit(len(cands), max(int(n_e.max()), 1), max(int(n_p.max()), 1))
-
-        def rows_cols(lengths):
-            row = np.repeat(np.arange(len(lengths)), lengths)
-            col = np.arange(int(lengths.sum())) - np.repeat(np.cumsum(lengths) - lengths, lengths)
-            return row, col
-
-        dtype = self.dtype
-        edges = np.zeros((b_cap, e_cap, 2, 2), dtype)
-        edge_mask = np.zeros((b_cap, e_cap), bool)
-        r, c = rows_cols(n_e)
-        edges[r, c] = np.concatenate([x.edges for x in cands])
-        edge_mask[r, c] = True
-        points = np.zeros((b_cap, p_cap, 2), dtype)
-        mass = np.zeros((b_cap, p_cap), dtype)
-        point_mask = np.zeros((b_cap, p_cap), bool)
-        cand = np.zeros((b_cap, p_cap, 3), np.int32)
-        ids = np.concatenate([x.point_ids for x in cands])
-        r, c = rows_cols(n_p)
-        points[r, c] = self.points[ids]
-        mass[r, c] = self.mass[ids]
-        point_mask[r, c] = True
-        cand[r, c] = np.concatenate([x.cand for x in cands])
-        return EdgeStencil(edges, edge_mask, points, mass, point_mask, cand)
+        ids = np.concatenate([c.point_ids for c in cands])
+        return pack_ragged(np.concatenate([c.edges for c in cands]), [len(c.keys) for c in cands],
+                           self.points[ids], self.mass[ids], np.concatenate([c.cand for c in cands]),
+                           [len(c.point_ids) for c in cands], self.buckets, self.dtype)
 
     def dispatch(self, cands: list[CandidateStencil]) -> list:
         """Packs and dispatches the batches of ``cands``; does not wait.
