@@ -12,7 +12,6 @@ from hypothesis import strategies as st
 from otjax.curves.plan import TransportPlan
 from otjax.curves.predicates import in_triangle_perturbed
 from otjax.curves.triangulation import Triangulation
-from otjax.stencil import Buckets
 from tests.oracles import oracle_edge_cost, oracle_segment_sqdist
 from tests.point_sets import make_points
 
@@ -127,14 +126,12 @@ def test_compiled_shapes_stay_few_over_2000_collapses():
     rng = np.random.default_rng(7)
     n = 2300
     pts = noisy_shape(rng, n)
-    buckets = Buckets()
-    plan = TransportPlan(Triangulation(np.unique(pts, axis=0)), pts, np.ones(n), buckets=buckets)
+    plan = TransportPlan(Triangulation(np.unique(pts, axis=0)), pts, np.ones(n))
     dirty = {int(v) for v in np.nonzero(plan.tri.alive & ~plan.tri.pinned)[0][:64]}
     for _ in range(2000):
-        cands = plan.candidates(sorted(dirty))  # every half-edge out of the dirty vertices
-        _delta, rows = plan.score(cands)
+        cands, _delta, rows = plan.score_batches(plan.exports(sorted(dirty)))  # every half-edge out of them
         pick = int(rng.integers(len(cands)))
         dirty = plan.apply(cands[pick], rows[pick])
-    log.info("compiled shapes: %s", sorted(buckets.shapes_seen))
-    print("distinct compiled shapes:", len(buckets.shapes_seen), sorted(buckets.shapes_seen))
-    assert len(buckets.shapes_seen) <= 12
+    log.info("compiled shapes: %s", sorted(plan.shapes_seen))
+    print("distinct compiled shapes:", len(plan.shapes_seen), sorted(plan.shapes_seen))
+    assert len(plan.shapes_seen) <= 12

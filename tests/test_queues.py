@@ -2,7 +2,8 @@
 
 Each piece is checked against an independent reference: the filtered JAX
 location against the exact host predicate, the packed kernel against the
-plain one, the vectorised packing against the reference packer, the sampler
+plain one, the fused flat kernel (in-kernel location) against host location
+and the padded kernel, the vectorised packing against the reference packer, the sampler
 against the uniform law (chi-square), a parallel round against the sum of its
 deltas and a from-scratch recomputation.
 """
@@ -74,18 +75,90 @@ def test_filtered_location_over_chunk_boundaries():
 
 
 # ------------------------------------------------------------------ batching
-def test_packed_kernel_equals_the_plain_kernel():
+def padded_reference(plan, cands):
+    """Scores host-located candidates with the plain padded kernel, one row each."""
     import jax
 
-    plan = make_plan(np.random.default_rng(2))
-    cands = plan.candidates(np.nonzero(plan.tri.alive & ~plan.tri.pinned)[0][:6].tolist())
-    batch = plan.pack(cands[: plan.buckets.batch_capacity(plan.buckets.point_capacity(
-        max(len(c.point_ids) for c in cands[:8])))][:8])
+    stencils = [(c.edges, plan.points[c.point_ids], plan.mass[c.point_ids], c.cand) for c in cands]
+    batch = pack_edge_stencils(stencils, Buckets(max_batch=1 << max(len(cands) - 1, 0).bit_length(),
+                                                 point_budget=2**62))
     with jax.enable_x64(True):
-        plain = jax.device_get(cost.batched_stencil_cost(batch))
-        host = cost.batched_stencil_cost_host(batch)
-    for name in plain._fields:
-        np.testing.assert_array_equal(getattr(host, name), getattr(plain, name), err_msg=name)
+        return jax.device_get(cost.batched_stencil_cost(batch))
+
+
+def assert_costs_match(cands, costs, ref):
+    for i, (c, r) in enumerate(zip(cands, costs)):
+        e, n = len(c.keys), len(c.point_ids)
+        np.testing.assert_array_equal(r.assignment, ref.assignment[i, :n])
+        np.testing.assert_array_equal(r.solid, ref.solid[i, :e])
+        for name in ("edge_cost", "normal", "tangential", "vertex", "edge_mass"):
+            np.testing.assert_allclose(getattr(r, name), getattr(ref, name)[i, :e], rtol=1e-12, atol=1e-15,
+                                       err_msg=name)
+        np.testing.assert_allclose(r.delta, ref.total[i] - c.before, rtol=1e-12, atol=1e-12)
+
+
+@pytest.mark.parametrize("seed", [2, 5])
+def test_fused_kernel_equals_host_location_and_the_plain_kernel(seed):
+    """Flat batches located in the kernel vs host-located padded stencils."""
+    plan = make_plan(np.random.default_rng(seed))
+    sources = np.nonzero(plan.tri.alive & ~plan.tri.pinned)[0].tolist()
+    located = plan.candidates(sources)
+    ref = padded_reference(plan, located)
+    # Small budgets: many batches, candidates of one source split across them.
+    cands, delta, costs = plan.score_batches(plan.exports(sources, budget=4096))
+    assert [c.plan for c in cands] == [c.plan for c in located]
+    assert all(c.cand is None for c in cands)  # nothing was located on the host
+    for c, h, r in zip(cands, located, costs):
+        np.testing.assert_array_equal(c.point_ids, h.point_ids)
+        np.testing.assert_array_equal(r.triangle, h.triangle_of_point[:h.n_inside])
+    assert_costs_match(cands, costs, ref)
+    # The located path (score) agrees too.
+    d2, costs2 = plan.score(located)
+    np.testing.assert_array_equal(d2, delta)
+    assert_costs_match(located, costs2, ref)
+
+
+def test_fused_kernel_on_collinear_data_falls_back_exactly():
+    """Points exactly on edges: the kernel's filter is unsure, the host decides."""
+    pts = make_points("grid", 64, 0)
+    plan = TransportPlan(Triangulation(np.unique(pts, axis=0)), pts, np.ones(len(pts)))
+    sources = np.nonzero(plan.tri.alive & ~plan.tri.pinned)[0].tolist()
+    located = plan.candidates(sources)
+    cands, _delta, costs = plan.score_batches(plan.exports(sources))
+    for h, r in zip(located, costs):
+        np.testing.assert_array_equal(r.triangle, h.triangle_of_point[:h.n_inside])
+    assert_costs_match(cands, costs, padded_reference(plan, located))
+
+
+def test_relocation_batches_equal_located_relocations():
+    plan = make_plan(np.random.default_rng(4))
+    rng = np.random.default_rng(0)
+    vs = np.nonzero(plan.tri.alive & ~plan.tri.pinned)[0][:40]
+    moves = [(int(v), plan.tri.xy[v] + 1e-3 * rng.standard_normal(2)) for v in vs]
+    located = plan.relocation_candidates(moves)
+    assert located
+    cands, _delta, costs = plan.score_batches(plan.relocation_exports(moves, budget=4096))
+    for h, r in zip(located, costs):
+        np.testing.assert_array_equal(r.triangle, h.triangle_of_point[:h.n_inside])
+    assert_costs_match(cands, costs, padded_reference(plan, located))
+
+
+@settings(max_examples=60, deadline=None)
+@given(data=st.data())
+def test_sort_order_equals_lexsort_with_near_ties(data):
+    """The quantised one-sort path (with its exact fallback) vs np.lexsort."""
+    import jax
+
+    n = data.draw(st.integers(2, 300))
+    rng = np.random.default_rng(data.draw(st.integers(0, 2**31)))
+    edge = rng.integers(0, data.draw(st.integers(1, 8)), n).astype(np.int32)
+    base = rng.choice([-1.0, 0.0, 0.3, 1e-300, 2.5], n) if data.draw(st.booleans()) else rng.random(n)
+    # Neighbouring floats: far below any quantisation step.
+    t = base + np.where(rng.random(n) < 0.5, 0.0, np.spacing(base) * rng.integers(-3, 4, n))
+    t[rng.random(n) < 0.1] = -0.0
+    with jax.enable_x64(True):
+        got = np.asarray(jax.jit(cost.sort_order, static_argnums=2)(edge, t, 8))
+    np.testing.assert_array_equal(got, np.lexsort((np.arange(n), np.where(t == 0, 0.0, t), edge)))
 
 
 def loop_pack(stencils, shape, dtype=np.float64):
@@ -111,10 +184,10 @@ def test_vectorised_packing_equals_a_row_by_row_reference():
     plan = make_plan(np.random.default_rng(3))
     cands = plan.candidates(np.nonzero(plan.tri.alive & ~plan.tri.pinned)[0][:3].tolist())[:5]
     stencils = [(c.edges, plan.points[c.point_ids], plan.mass[c.point_ids], c.cand) for c in cands]
-    for got in (plan.pack(cands), pack_edge_stencils(stencils, plan.buckets, plan.dtype)):
-        want = loop_pack(stencils, got.shape)
-        for name, w in zip(got._fields, want):
-            np.testing.assert_array_equal(getattr(got, name), w, err_msg=name)
+    got = pack_edge_stencils(stencils, Buckets(), np.float64)
+    want = loop_pack(stencils, got.shape)
+    for name, w in zip(got._fields, want):
+        np.testing.assert_array_equal(getattr(got, name), w, err_msg=name)
 
 
 @given(st.lists(st.integers(1, 40_000), min_size=1, max_size=200))

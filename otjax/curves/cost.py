@@ -230,31 +230,19 @@ def _float_order_key(t: jax.Array) -> jax.Array:
     """Signed integers of ``t``'s width that sort exactly as ``t`` does.
 
     IEEE floats of one sign order as their bit patterns; flipping the
-    magnitude bits of negatives reverses their order. ``-0.0`` is first
-    mapped to ``+0.0`` so that equal values get equal keys. Not for NaN.
+    magnitude bits of negatives reverses their order. ``-0.0`` (the sign bit
+    alone) is mapped to ``+0.0`` so that equal values get equal keys. Integer
+    operations only: XLA:CPU may flush subnormals to zero in float
+    comparisons, which would tie them with 0. Not for NaN.
     """
     int_type = {2: jnp.int16, 4: jnp.int32, 8: jnp.int64}[t.dtype.itemsize]
-    bits = jax.lax.bitcast_convert_type(jnp.where(t == 0, jnp.zeros_like(t), t), int_type)
+    bits = jax.lax.bitcast_convert_type(t, int_type)
+    bits = jnp.where(bits == jnp.iinfo(int_type).min, 0, bits)
     return jnp.where(bits < 0, bits ^ jnp.iinfo(int_type).max, bits)
 
 
-def sort_order(edge: jax.Array, t: jax.Array, num_bins: int) -> jax.Array:
-    """Permutation sorting points by ``(edge, t, index)``; same as a lexsort.
-
-    XLA:CPU sorts a single integer operand with a native comparator, about
-    5x faster than float keys or multi-operand (lexsort/argsort) sorts
-    (measured). So: rank ``t`` through its integer order key (one keys-only
-    sort and a binary search; equal ``t`` share a rank), pack
-    ``(edge, rank, index)`` into one integer and sort that alone.
-
-    Args:
-      edge: ``(P,)`` int in ``[0, num_bins)``.
-      t: ``(P,)`` float, no NaN.
-      num_bins: static bound on ``edge``.
-
-    Returns:
-      ``(P,)`` int32 permutation.
-    """
+def _sort_order_exact(edge: jax.Array, t: jax.Array, num_bins: int) -> jax.Array:
+    """:func:`sort_order` by two integer sorts and a binary search."""
     n = t.shape[0]
     key_t = _float_order_key(t)
     rank_t = jnp.searchsorted(jnp.sort(key_t), key_t, side="left")
@@ -267,6 +255,64 @@ def sort_order(edge: jax.Array, t: jax.Array, num_bins: int) -> jax.Array:
     idx = jnp.arange(n, dtype=key_type)
     key = (edge.astype(key_type) * n + rank_t.astype(key_type)) * n + idx
     return (jnp.sort(key) % n).astype(jnp.int32)
+
+
+def _sort_order_quantized(edge: jax.Array, t: jax.Array, num_bins: int, q_bits: int) -> jax.Array:
+    """:func:`sort_order` by one int64 sort of ``(edge, quantised t, index)``.
+
+    ``t`` is mapped to ``q_bits``-bit integers per bin, ``floor((t - lo) *
+    (2^q - 1) / (hi - lo))`` with ``lo, hi`` the bin's extremes: a rounded
+    subtraction, a product with a positive constant and a floor are each
+    non-decreasing, so ``q_i < q_j`` implies ``t_i < t_j``. The sort is
+    therefore exact except inside a run of equal ``q`` (points closer than
+    ``(hi - lo) / 2^q`` along their edge), where it falls back on index
+    order; if such a run is not already ordered by ``t``, the exact two-sort
+    path (:func:`_sort_order_exact`) decides instead, so the result is
+    always the exact order.
+    """
+    n = t.shape[0]
+    i_bits = max(n - 1, 1).bit_length()
+    lo = jax.ops.segment_min(t, edge, num_segments=num_bins)[edge]
+    hi = jax.ops.segment_max(t, edge, num_segments=num_bins)[edge]
+    span = hi - lo
+    top = float(2**q_bits - 1)
+    scale = jnp.where(span > 0, top / jnp.where(span > 0, span, 1), 0)
+    q = jnp.clip(jnp.floor((t - lo) * scale), 0, top).astype(jnp.int64)
+    idx = jnp.arange(n, dtype=jnp.int64)
+    key = (edge.astype(jnp.int64) << (q_bits + i_bits)) | (q << i_bits) | idx
+    sk = jnp.sort(key)
+    order = (sk & ((1 << i_bits) - 1)).astype(jnp.int32)
+    run = sk[1:] >> i_bits == sk[:-1] >> i_bits  # same bin and same q
+    # Compared as integer order keys: float comparisons may flush subnormals.
+    ts = _float_order_key(t)[order]
+    ambiguous = jnp.any(run & (ts[1:] < ts[:-1]))
+    return jax.lax.cond(ambiguous, lambda: _sort_order_exact(edge, t, num_bins), lambda: order)
+
+
+def sort_order(edge: jax.Array, t: jax.Array, num_bins: int) -> jax.Array:
+    """Permutation sorting points by ``(edge, t, index)``; same as a lexsort.
+
+    XLA:CPU sorts a single integer operand with a native comparator, about
+    5x faster than float keys or multi-operand (lexsort/argsort) sorts
+    (measured). With 64-bit integers available, ``(edge, t, index)`` goes
+    into one such key, ``t`` quantised per edge with an exact fallback
+    (:func:`_sort_order_quantized`; 2.5x faster at 32k points, measured);
+    otherwise ``t`` is ranked through its integer order key (one keys-only
+    sort and a binary search) and ``(edge, rank, index)`` sorted.
+
+    Args:
+      edge: ``(P,)`` int in ``[0, num_bins)``.
+      t: ``(P,)`` float, no NaN.
+      num_bins: static bound on ``edge``.
+
+    Returns:
+      ``(P,)`` int32 permutation.
+    """
+    n = t.shape[0]
+    q_bits = 62 - max(n - 1, 1).bit_length() - max(num_bins - 1, 1).bit_length()
+    if jax.config.jax_enable_x64 and q_bits >= 20:
+        return _sort_order_quantized(edge, t, num_bins, min(q_bits, 52))
+    return _sort_order_exact(edge, t, num_bins)
 
 
 def mass_before_sort(edge: jax.Array, t: jax.Array, m: jax.Array, num_bins: int | None = None) -> jax.Array:

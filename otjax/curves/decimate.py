@@ -35,10 +35,6 @@ from otjax.curves.plan import TransportPlan
 from otjax.curves.relocation import relocate
 
 QUEUES = ("exhaustive", "multiple-choice", "parallel")
-# Bound on the (point, new triangle) pairs of one export (~100 bytes each).
-# Small enough that exports come in several chunks, each exported while the
-# previous one is scored (measured 50k points: 28.7 s with 2M, 27.6 s).
-EXPORT_PAIR_BUDGET = 300_000
 # Parallel rounds look at most this many times their budget down the queue.
 PARALLEL_SCAN = 2
 
@@ -81,17 +77,16 @@ def within_tolerance(tolerance: float):
     tolerance reads like a distance, independent of how masses are scaled.
 
     Returns:
-      ``(candidate, result, row) -> bool``.
+      ``(candidate, cost) -> bool``, ``cost`` its
+      :class:`~otjax.curves.plan.CandidateCost`.
     """
     tol2 = float(tolerance) ** 2
 
-    def ok(cand, res, row) -> bool:
-        e = len(cand.keys)
-        m = np.asarray(res.edge_mass[row, :e])
-        solid = np.asarray(res.solid[row, :e])
-        first = np.where(solid, res.normal[row, :e], res.vertex[row, :e])
-        second = np.where(solid, res.tangential[row, :e], 0.0)
-        bound = tol2 * m
+    def ok(cand, cost) -> bool:
+        solid = cost.solid
+        first = np.where(solid, cost.normal, cost.vertex)
+        second = np.where(solid, cost.tangential, 0.0)
+        bound = tol2 * cost.edge_mass
         return bool(np.all((first <= bound) & (second <= bound)))
 
     return ok
@@ -115,7 +110,7 @@ class _Scores:
         # scoring call stay at hand ("hot"), because the winner is usually
         # among them; any other winner is exported again when it is applied.
         self.entries: dict[tuple[int, int], tuple[float, int]] = {}  # key -> (delta, version)
-        self.hot: dict[tuple[int, int], tuple] = {}  # key -> (candidate, row, version)
+        self.hot: dict[tuple[int, int], tuple] = {}  # key -> (candidate, cost, version)
         self.heap: list = []
         self.use_heap = False
         # Exact ties (zero-cost collapses along clean straight runs) pop in
@@ -145,52 +140,49 @@ class _Scores:
             return key
         return None
 
-    def _score(self, cands):
+    def _settle(self, flat, pending, keep_hot: bool) -> list:
         t1 = time.perf_counter()
-        delta, rows = self.plan.score(cands)
+        _delta, costs = self.plan.collect(flat, pending)
         self.stats.seconds["score"] += time.perf_counter() - t1
-        self.stats.scored += len(cands)
-        return delta, rows
+        self.stats.scored += len(costs)
+        for c, r in zip(flat.cands, costs):
+            if self.admissible is not None and not self.admissible(c, r):
+                continue
+            key = (c.plan.source, c.plan.target)
+            ver = self.version[key[0]]
+            self.entries[key] = (r.delta, ver)
+            if keep_hot:
+                self.hot[key] = (c, r, ver)
+            if self.use_heap:
+                self.push(key)
+        return costs
+
+    def _dispatch(self, exports):
+        """Next batch of ``exports`` (a generator: exports as it goes), dispatched."""
+        t0 = time.perf_counter()
+        flat = next(exports, None)
+        if flat is None:
+            return None
+        t1 = time.perf_counter()
+        pending = self.plan.dispatch(flat)
+        self.stats.seconds["export"] += t1 - t0
+        self.stats.seconds["score"] += time.perf_counter() - t1
+        return flat, pending
 
     def rescore(self, sources, targets: dict | None = None, keep_hot: bool = True) -> None:
         """Exports and scores the half-edges leaving ``sources`` (see
-        :meth:`TransportPlan.candidates`), in chunks bounded in points."""
-        plan = self.plan
+        :meth:`TransportPlan.exports`), batch by batch."""
         self.hot = {}
-        in_flight = None
-
-        def settle(cands, pending):
-            t1 = time.perf_counter()
-            delta, rows = plan.collect(cands, pending)
-            self.stats.seconds["score"] += time.perf_counter() - t1
-            self.stats.scored += len(cands)
-            for c, d, r in zip(cands, delta, rows):
-                if self.admissible is not None and not self.admissible(c, *r):
-                    continue
-                key = (c.plan.source, c.plan.target)
-                ver = self.version[key[0]]
-                self.entries[key] = (float(d), ver)
-                if keep_hot:
-                    self.hot[key] = (c, r, ver)
-                if self.use_heap:
-                    self.push(key)
-
-        # A chunk's kernels run while the next chunk is exported.
-        for chunk in plan.source_chunks(sorted(sources), EXPORT_PAIR_BUDGET):
-            t0 = time.perf_counter()
-            cands = plan.candidates(chunk, targets)
-            t1 = time.perf_counter()
-            pending = plan.dispatch(cands)
-            self.stats.seconds["export"] += t1 - t0
-            self.stats.seconds["score"] += time.perf_counter() - t1
-            if in_flight is not None:
-                settle(*in_flight)
-            in_flight = (cands, pending)
-        if in_flight is not None:
-            settle(*in_flight)
+        exports = self.plan.exports(sorted(sources), targets)
+        # A batch's kernel runs while the next batch is exported.
+        in_flight = self._dispatch(exports)
+        while in_flight is not None:
+            following = self._dispatch(exports)
+            self._settle(*in_flight, keep_hot)
+            in_flight = following
 
     def take(self, keys) -> list[tuple]:
-        """``(candidate, row)`` of fresh entries, exporting again what is not hot.
+        """``(candidate, cost)`` of fresh entries, exporting again what is not hot.
 
         The entries leave the queue. A re-export of a fresh entry is the same
         stencil (nothing around it changed), scored again in one batch.
@@ -205,11 +197,12 @@ class _Scores:
                 again.setdefault(key[0], []).append(key[1])
             self.entries.pop(key, None)
         if again:
-            t0 = time.perf_counter()
-            cands = self.plan.candidates(sorted(again), again)
-            self.stats.seconds["export"] += time.perf_counter() - t0
-            _, rows = self._score(cands)
-            for c, r in zip(cands, rows):
+            flat, pending = self._dispatch(iter([self.plan.export(sorted(again), again)]))
+            t1 = time.perf_counter()
+            _delta, costs = self.plan.collect(flat, pending)
+            self.stats.seconds["score"] += time.perf_counter() - t1
+            self.stats.scored += len(costs)
+            for c, r in zip(flat.cands, costs):
                 out[(c.plan.source, c.plan.target)] = (c, r)
         return [out[key] for key in keys]
 

@@ -19,47 +19,83 @@ the greedy order is the same as for W2 itself, and squared costs add.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import NamedTuple
 
 import jax
 import numpy as np
 
-from otjax.curves import cost as _cost
+from otjax.curves import scoring as _scoring
 from otjax.curves.location import MIN_PAIRS as LOCATE_MIN_PAIRS
 from otjax.curves.location import locate_pairs
 from otjax.curves.predicates import orient_perturbed
 from otjax.curves.triangulation import CollapsePlan, Triangulation, edge_key
-from otjax.stencil import Buckets, EdgeStencil, pack_edge_stencils, pack_ragged, ragged_index
+from otjax.stencil import ragged_index
 
 _NO_IDS = np.zeros(0, np.int64)
+# Rows (point, candidate pairs) per kernel call in the decimation loop: large
+# enough that the call overhead (~0.1 ms) is small against the work, small
+# enough that the next chunk is exported while this one is scored.
+ROW_BUDGET = 1 << 16
 
 
 class CandidateStencil(NamedTuple):
-    """One candidate collapse, exported for scoring.
+    """One candidate change (collapse or relocation), exported for scoring.
 
     Attributes:
       plan: the topological plan (flips + collapse).
-      keys: ``(E, 2)`` global keys of the local edges after the collapse,
+      keys: ``(E, 2)`` global keys of the local edges after the change,
         sorted; row ``i`` is local edge ``i``.
       edges: ``(E, 2, 2)`` endpoint coordinates, lower id first.
-      point_ids: ``(P,)`` global ids of the stencil's points.
-      cand: ``(P, 3)`` local candidate edges per point (see ``EdgeStencil``).
-      triangle_of_point: ``(P,)`` index into ``plan.new_triangles`` for points
-        of the changed region, ``-1`` for points outside it whose edge is fixed.
+      point_ids: ``(P,)`` global ids of the stencil's points: the
+        ``n_inside`` points of the changed region first, then the points
+        outside it that keep their (link) edge.
+      n_inside: number of points of the changed region.
       before: cost of the region's edges before the change.
       moved: for a relocation, the new position of ``plan.source`` (then
         ``plan.target == plan.source`` and the triangles are the star's own);
         ``None`` for a collapse.
+      cand: ``(P, 3)`` local candidate edges per point (see
+        :class:`~otjax.stencil.EdgeStencil`), or ``None`` when the points are
+        left to the scoring kernel to locate (see :meth:`TransportPlan.export`).
+      triangle_of_point: ``(P,)`` index into ``plan.new_triangles`` for the
+        points of the changed region, ``-1`` for the others; ``None`` with
+        ``cand``.
     """
 
     plan: CollapsePlan
     keys: np.ndarray
     edges: np.ndarray
     point_ids: np.ndarray
-    cand: np.ndarray
-    triangle_of_point: np.ndarray
+    n_inside: int
     before: float
     moved: np.ndarray | None = None
+    cand: np.ndarray | None = None
+    triangle_of_point: np.ndarray | None = None
+
+
+class CandidateCost(NamedTuple):
+    """The scored outcome of one candidate (host arrays, views into a batch).
+
+    Attributes:
+      delta: cost after the change minus ``before``.
+      edge_cost, normal, tangential, vertex, edge_mass: ``(E,)`` per local
+        edge, as in :class:`~otjax.curves.cost.StencilCost`.
+      solid: ``(E,)`` bool.
+      assignment: ``(P,)`` local edge of each point.
+      triangle: ``(n_inside,)`` index into ``plan.new_triangles`` of the
+        triangle holding each point of the changed region.
+    """
+
+    delta: float
+    edge_cost: np.ndarray
+    normal: np.ndarray
+    tangential: np.ndarray
+    vertex: np.ndarray
+    edge_mass: np.ndarray
+    solid: np.ndarray
+    assignment: np.ndarray
+    triangle: np.ndarray
 
 
 def segment_sqdist_np(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -86,24 +122,22 @@ class TransportPlan:
       tri: the triangulation (owned and mutated by this plan).
       points: ``(n, 2)`` float64 input points.
       mass: ``(n,)`` float64 non-negative masses.
-      buckets: padding capacities for stencil batches.
-      dtype: float dtype for the cost kernel (float64 for exact greedy order).
+      dtype: float dtype of the cost arithmetic (float64 for exact greedy
+        order); point location is float64 whatever this is.
       max_source_degree: half-edges leaving a vertex of higher degree are not
         candidates until its degree falls (see :meth:`candidates`).
     """
 
     def __init__(self, tri: Triangulation, points: np.ndarray, mass: np.ndarray,
-                 buckets: Buckets | None = None, dtype=np.float64, max_source_degree: int = 32):
+                 dtype=np.float64, max_source_degree: int = 32):
         self.tri = tri
         self.points = np.asarray(points, np.float64)
         self.mass = np.asarray(mass, np.float64)
         self._point_rows = np.ascontiguousarray(self.points.T)  # (2, n): gathers stay contiguous
-        # Local edge counts hardly vary: start the edge capacity where most
-        # runs end, which saves the recompiles of growing it.
-        self.buckets = buckets if buckets is not None else Buckets(min_edges=64)
         self.dtype = dtype
         self.n_kernel_calls = 0
         self.location_kernel_used = False
+        self.shapes_seen: set[int] = set()  # row capacities of the scoring kernel
         self.max_source_degree = max_source_degree
         # Collapse plans depend only on the stars of their two ends: cache
         # them, stamped with per-vertex versions bumped when a star changes.
@@ -167,35 +201,36 @@ class TransportPlan:
         return keys[np.arange(len(ids)), d.argmin(1)]
 
     # -------------------------------------------------------------- scoring
-    def evaluate(self, batch: EdgeStencil):
-        """Runs the batched cost kernel; returns a NumPy ``StencilCost``."""
-        self.n_kernel_calls += 1
-        with jax.enable_x64(self.dtype == np.float64):
-            return _cost.batched_stencil_cost_host(batch)
-
     def _score_all_edges(self) -> None:
         """Computes the cost of every edge that holds points, in batches."""
         keys = self.pt_edge[:, 0] * len(self.tri.xy) + self.pt_edge[:, 1]
         order = np.argsort(keys, kind="stable")
-        _uniq, starts = np.unique(keys[order], return_index=True)
-        groups = np.split(order, starts[1:])
+        _uniq, starts, counts = np.unique(keys[order], return_index=True, return_counts=True)
         xy = self.tri.xy
-        for batch in self.buckets.batches([len(g) for g in groups]):
-            stencils, ekeys = [], []
-            for g in (groups[i] for i in batch):
-                u, v = self.pt_edge[g[0]]
-                stencils.append((xy[[u, v]][None], self.points[g], self.mass[g],
-                                 np.zeros((len(g), 3), np.int32)))
-                ekeys.append((int(u), int(v)))
-            res = self.evaluate(pack_edge_stencils(stencils, self.buckets, self.dtype))
-            for i, k in enumerate(ekeys):
-                self.edge_cost[k] = float(res.edge_cost[i, 0])
-                self.edge_solid[k] = bool(res.solid[i, 0])
+        ends = self.pt_edge[order[starts]]  # (n_edges, 2)
+        # Whole edges per batch, about ROW_BUDGET points each; the row
+        # capacity also bounds the edges per batch.
+        first = 0
+        while first < len(starts):
+            rows = np.cumsum(counts[first:])
+            last = first + max(1, int(np.searchsorted(rows, 4 * ROW_BUDGET, side="right")))
+            last = min(last, first + ROW_BUDGET)
+            ids = order[starts[first]: starts[last - 1] + counts[last - 1]]
+            edge_of_row = np.repeat(np.arange(last - first), counts[first:last])
+            flat = _Flat.without_triangles(
+                ids, np.repeat(edge_of_row[:, None], 3, 1), np.zeros(len(ids), np.int64),
+                xy[ends[first:last]], np.zeros(last - first, np.int64), [None])
+            total, per_edge, *_ = self._run(flat)
+            del total
+            for i, (u, v) in enumerate(ends[first:last].tolist()):
+                self.edge_cost[(u, v)] = float(per_edge[i, 0])
+                self.edge_solid[(u, v)] = bool(per_edge[i, 5] > 0)
+            first = last
 
     @property
     def compiled_shapes(self) -> int:
-        """Distinct kernel shapes this plan has used: cost kernel and location kernel."""
-        return len(self.buckets.shapes_seen) + int(self.location_kernel_used)
+        """Distinct kernel shapes this plan has used: scoring kernel and location kernel."""
+        return len(self.shapes_seen) + int(self.location_kernel_used)
 
     def solid_of(self, keys: np.ndarray) -> np.ndarray:
         """``(n,)`` bool: whether each edge key of ``keys (n, 2)`` is solid.
@@ -254,36 +289,73 @@ class TransportPlan:
         ids = np.concatenate(across)
         link = np.repeat(np.arange(n), counts)
         r = np.asarray(ring, np.int64)
-        lo, hi = np.minimum(r, np.roll(r, -1)), np.maximum(r, np.roll(r, -1))
+        nxt = np.asarray(ring[1:] + ring[:1], np.int64)
+        lo, hi = np.minimum(r, nxt), np.maximum(r, nxt)
         e = self.pt_edge[ids]
         keep = (e[:, 0] == lo[link]) & (e[:, 1] == hi[link])
         return ring, star, inside, ids[keep], link[keep], before
 
-    def source_chunks(self, sources, budget: int):
-        """Splits ``sources`` into runs whose export stays under ``budget``.
+    def exports(self, sources, targets: dict | None = None, budget: int = ROW_BUDGET):
+        """Yields :meth:`export` batches of the half-edges leaving ``sources``.
 
-        The export of the half-edges leaving ``v`` tests each point of the
-        star against each new triangle of each candidate: about
-        ``deg^2 * points`` (point, triangle) pairs, each ~100 bytes. This
-        bounds them per run (a single source may exceed it alone).
-
-        Yields:
-          Lists of vertex ids, in the order given.
+        Consecutive candidates are grouped so that each batch fits the row
+        capacity ``budget`` (a power of two; a single candidate may need
+        more): the kernel's cost is per padded row, and cutting a long list
+        of candidates into batches that fill their capacity keeps padding
+        small (cut by sources, half the rows were padding) and the shapes
+        few. A generator, so that the next batch is exported while the
+        kernel scores the last.
         """
+        return self._batches((job for v in sources for job in self._collapse_jobs([v], targets)), budget)
+
+    def relocation_exports(self, moves, budget: int = ROW_BUDGET):
+        """:meth:`exports` for the moves of :meth:`relocation_candidates`."""
+        return self._batches(self._relocation_jobs(moves), budget)
+
+    def _batches(self, jobs_iter, budget: int):
+        jobs, rows, edges, tris = [], 0, 0, 0
+        for job in jobs_iter:
+            r = len(job[2][2]) + len(job[2][3])
+            t = len(job[1])
+            # Edges of a triangulated disc of t triangles: at most 2 t + 1.
+            if jobs and _scoring.capacity(rows + r, edges + 2 * t + 1, tris + t, len(jobs) + 1) > budget:
+                yield self._export(jobs, on_host=False)
+                jobs, rows, edges, tris = [], 0, 0, 0
+            jobs.append(job)
+            rows, edges, tris = rows + r, edges + 2 * t + 1, tris + t
+        if jobs:
+            yield self._export(jobs, on_host=False)
+
+    def _collapse_jobs(self, sources, targets):
         tri = self.tri
-        run, used = [], 0
+        jobs = []
         for v in sources:
             if not tri.alive[v] or tri.pinned[v]:
                 continue
-            ring, star = tri.star(v)
-            work = len(ring) ** 2 * (1 + sum(len(self.face_pts[f]) for f in star))
-            if run and used + work > budget:
-                yield run
-                run, used = [], 0
-            run.append(v)
-            used += work
-        if run:
-            yield run
+            if len(tri.star(v)[0]) > self.max_source_degree:
+                continue
+            region = self._region(v)
+            ring = region[0]
+            if targets is None:
+                wanted = ring
+            else:
+                allowed = set(targets[v])
+                wanted = [w for w in ring if w in allowed]
+            for w in wanted:
+                plan = self._plan(v, w)
+                if plan is not None:
+                    jobs.append((plan, np.asarray(plan.new_triangles, np.int64), region, None))
+        return jobs
+
+    def export(self, sources, targets: dict | None = None) -> "_Flat":
+        """Exports the half-edges leaving ``sources`` as one flat batch, unlocated.
+
+        What :meth:`candidates` does, except that the points of each changed
+        region are left for the scoring kernel to locate (see
+        :mod:`otjax.curves.scoring`): the decimation loop's fast path. Pass
+        the result to :meth:`dispatch`; its candidates are ``.cands``.
+        """
+        return self._export(self._collapse_jobs(sources, targets), on_host=False)
 
     def candidates(self, sources, targets: dict | None = None) -> list[CandidateStencil]:
         """Exports the collapse stencils of every half-edge leaving ``sources``.
@@ -309,28 +381,11 @@ class TransportPlan:
             half-edges (default: every neighbour).
 
         Returns:
-          Candidates in order of ``sources`` then ring order; half-edges that
+          Candidates in order of ``sources`` then ring order, every point
+          located (``cand`` and ``triangle_of_point`` set); half-edges that
           cannot be collapsed are left out.
         """
-        tri = self.tri
-        jobs = []
-        for v in sources:
-            if not tri.alive[v] or tri.pinned[v]:
-                continue
-            if len(tri.star(v)[0]) > self.max_source_degree:
-                continue
-            region = self._region(v)
-            ring = region[0]
-            if targets is None:
-                wanted = ring
-            else:
-                allowed = set(targets[v])
-                wanted = [w for w in ring if w in allowed]
-            for w in wanted:
-                plan = self._plan(v, w)
-                if plan is not None:
-                    jobs.append((plan, np.asarray(plan.new_triangles, np.int64), region, None))
-        return self._export(jobs)
+        return self._export(self._collapse_jobs(sources, targets), on_host=True).cands
 
     def candidate(self, source: int, target: int) -> CandidateStencil | None:
         """Exports the stencil of collapsing ``source`` onto ``target``.
@@ -349,12 +404,14 @@ class TransportPlan:
             non-overlapping ones).
 
         Returns:
-          One candidate per move whose ``position`` lies strictly inside the
-          kernel of the one-ring of ``v`` (the only moves that keep the
-          embedding); the others are left out.
+          One located candidate per move whose ``position`` lies strictly
+          inside the kernel of the one-ring of ``v`` (the only moves that
+          keep the embedding); the others are left out.
         """
+        return self._export(list(self._relocation_jobs(moves)), on_host=True).cands
+
+    def _relocation_jobs(self, moves):
         tri = self.tri
-        jobs = []
         for v, position in moves:
             position = np.asarray(position, np.float64)
             ring, star = tri.star(v)
@@ -363,8 +420,7 @@ class TransportPlan:
             n = len(ring)
             tris = np.array([[v, ring[k], ring[(k + 1) % n]] for k in range(n)], np.int64)
             plan = CollapsePlan(v, v, tuple(ring), tuple(star), (), (), tuple(map(tuple, tris.tolist())))
-            jobs.append((plan, tris, self._region(v), position))
-        return self._export(jobs)
+            yield plan, tris, self._region(v), position
 
     def relocation_candidate(self, v: int, position) -> CandidateStencil | None:
         """The stencil of moving ``v`` to ``position``, or ``None`` if that
@@ -372,201 +428,284 @@ class TransportPlan:
         out = self.relocation_candidates([(v, position)])
         return out[0] if out else None
 
-    def _export(self, jobs) -> list[CandidateStencil]:
-        """Builds the stencils of ``(plan, triangles, region, moved)`` jobs.
+    def _export(self, jobs, on_host: bool) -> "_Flat":
+        """Builds the flat batch of ``(plan, triangles, region, moved)`` jobs.
 
         Everything is done on concatenated arrays over all jobs (edge keys,
-        local numbering, exact point location); the per-job Python work is
-        slicing only.
+        flat numbering, fans); the per-job Python work is slicing only.
+        ``on_host``: locate every point here (exactly); otherwise only the
+        points of jobs with more ears than the kernel tests.
         """
         if not jobs:
-            return []
+            return _Flat.empty()
         xy = self.tri.xy
         nv = len(xy)
         nj = len(jobs)
         n_tri = np.array([len(job[1]) for job in jobs])
-        tris = np.concatenate([job[1] for job in jobs])  # (sum T, 3)
+        tris = np.concatenate([job[1] for job in jobs])  # (T, 3)
         tri_job = np.repeat(np.arange(nj), n_tri)
-        coords = xy[tris]  # (sum T, 3, 2)
+        coords = xy[tris]  # (T, 3, 2)
+        tri_start = np.concatenate([[0], np.cumsum(n_tri)])
         for j, (plan, t, _region, moved) in enumerate(jobs):
             if moved is not None:
-                s = slice(int(n_tri[:j].sum()), int(n_tri[: j + 1].sum()))
+                s = slice(tri_start[j], tri_start[j + 1])
                 coords[s] = np.where((t == plan.source)[..., None], moved, coords[s])
-        tri_start = np.concatenate([[0], np.cumsum(n_tri)])
-        coords_rows = np.ascontiguousarray(coords.reshape(-1, 6).T)  # (6, sum T)
+        coords_rows = np.ascontiguousarray(coords.reshape(-1, 6).T)  # (6, T)
 
         # Local edges: keys coded job-major, so np.unique numbers every job's
-        # edges contiguously and in increasing key order within the job.
-        e = np.sort(np.stack([tris, tris[:, [1, 2, 0]]], -1), -1)  # (sum T, 3, 2)
+        # edges contiguously and in increasing key order within the job:
+        # the flat number of an edge is its job's offset plus its local one.
+        e = np.sort(np.stack([tris, tris[:, [1, 2, 0]]], -1), -1)  # (T, 3, 2)
         code = (np.repeat(tri_job, 3) * nv + e[..., 0].ravel()) * nv + e[..., 1].ravel()
         ucode, inv = np.unique(code, return_inverse=True)
-        ujob = ucode // (nv * nv)
-        edge_start = np.searchsorted(ujob, np.arange(nj + 1))
+        edge_job = ucode // (nv * nv)
+        edge_start = np.searchsorted(edge_job, np.arange(nj + 1))
         ukeys = np.stack([(ucode // nv) % nv, ucode % nv], 1)
-        tcand = np.sort(inv.reshape(-1, 3) - edge_start[tri_job][:, None], 1).astype(np.int32)
+        tri_edges = np.sort(inv.reshape(-1, 3), 1)
+        edge_xy = xy[ukeys]
+        for j, (plan, _t, _region, moved) in enumerate(jobs):
+            if moved is not None:
+                es = slice(edge_start[j], edge_start[j + 1])
+                edge_xy[es] = np.where((ukeys[es] == plan.source)[..., None], moved, edge_xy[es])
 
-        # Exact location of every inside point among its job's new triangles:
-        # one row per (point, triangle) pair, one predicate call in total.
+        # Rows: per job, the points of the region, then the points across its
+        # link that keep their link edge.
         n_in = np.array([len(job[2][2]) for job in jobs])
-        inside = np.concatenate([job[2][2] for job in jobs]).astype(np.int64)
-        pt_job = np.repeat(np.arange(nj), n_in)
-        t_global = self._locate_inside(jobs, coords, coords_rows, tri_start, n_tri, inside, pt_job)
-        t_local = t_global - tri_start[pt_job]
-        in_cand = tcand[t_global]
-
-        # Points outside the region keep their (link) edge: look its key up.
         n_out = np.array([len(job[2][3]) for job in jobs])
-        outside = np.concatenate([job[2][3] for job in jobs]).astype(np.int64)
-        if len(outside):
-            out_job = np.repeat(np.arange(nj), n_out)
+        n_rows = n_in + n_out
+        row_start = np.concatenate([[0], np.cumsum(n_rows)])
+        parts = []
+        for job in jobs:
+            parts += [job[2][2], job[2][3]]
+        row_point = np.concatenate(parts).astype(np.int64)
+        row_job = np.repeat(np.arange(nj), n_rows)
+        row_cand = np.zeros((len(row_point), 3), np.int64)
+        row_locate = np.ones(len(row_point), bool)
+        if n_out.sum():
+            out_job, k = ragged_index(n_out)
+            out_rows = row_start[out_job] + n_in[out_job] + k
             ring_arr = [np.asarray(job[2][0], np.int64) for job in jobs]
-            link = np.concatenate([job[2][4] for job in jobs])
             a = np.concatenate([r[job[2][4]] for r, job in zip(ring_arr, jobs)])
             b = np.concatenate([r[(job[2][4] + 1) % len(r)] for r, job in zip(ring_arr, jobs)])
-            del link
             lk = (out_job * nv + np.minimum(a, b)) * nv + np.maximum(a, b)
-            out_local = (np.searchsorted(ucode, lk) - edge_start[out_job]).astype(np.int32)
-            out_cand = np.repeat(out_local[:, None], 3, 1)
-        else:
-            out_cand = np.zeros((0, 3), np.int32)
+            row_cand[out_rows] = np.searchsorted(ucode, lk)[:, None]
+            row_locate[out_rows] = False
 
-        in_start = np.concatenate([[0], np.cumsum(n_in)])
-        out_start = np.concatenate([[0], np.cumsum(n_out)])
-        edges_all = xy[ukeys]
-        out = []
-        for j, (plan, _t, region, moved) in enumerate(jobs):
-            es = slice(edge_start[j], edge_start[j + 1])
-            si = slice(in_start[j], in_start[j + 1])
-            so = slice(out_start[j], out_start[j + 1])
-            keys = ukeys[es]
-            edges = edges_all[es]
-            if moved is not None:
-                edges = np.where((keys == plan.source)[..., None], moved, edges)
-            out.append(CandidateStencil(
-                plan, keys, edges,
-                np.concatenate([inside[si], outside[so]]),
-                np.concatenate([in_cand[si], out_cand[so]]),
-                np.concatenate([t_local[si], np.full(n_out[j], -1, np.int64)]),
-                region[5], moved))
-        return out
-
-    def _locate_inside(self, jobs, coords, coords_rows, tri_start, n_tri, inside, pt_job) -> np.ndarray:
-        """Index (into the jobs' concatenated triangles) of the new triangle holding each inside point.
-
-        A guess first: the new triangles of a job are some flipped-out ears
-        followed by a fan around one apex (the collapse target, or the moved
-        vertex), CCW, so the fan triangle of a point is the angular sector
-        around the apex it falls in: one ``searchsorted`` for all jobs. The
-        exact test confirms each guess; points it rejects (in an ear, near a
-        sector boundary, on the apex) are tested against every new triangle
-        of their job, as before the guess. So the answer is the exact
-        perturbed location in every case, at about one tested pair per point
-        instead of ``deg - 2``.
-        """
-        out = np.full(len(inside), -1, np.int64)
-        if not len(inside):
-            return out
-        nj = len(jobs)
+        # Fans: the new triangles of a job are its flipped-out ears, then a
+        # fan around one apex (the target, or the moved vertex), CCW.
         n_flip = np.fromiter((len(job[0].flipped_out) for job in jobs), np.int64, nj)
         fan_start = tri_start[:-1] + n_flip
         n_fan = n_tri - n_flip
-        fan_off = np.concatenate([[0], np.cumsum(n_fan)])
+        job_fan = np.concatenate([[0], np.cumsum(n_fan)])
         fan_job, k = ragged_index(n_fan)
-        fans = fan_start[fan_job] + k
-        apex = coords[fan_start, 0]  # (nj, 2): fan triangles are (apex, a, b)
-        first = coords[fan_start, 1] - apex
-        theta0 = np.arctan2(first[:, 1], first[:, 0])
-        d = coords[fans, 1] - apex[fan_job]
-        phi = np.mod(np.arctan2(d[:, 1], d[:, 0]) - theta0[fan_job], 2 * np.pi)
-        phi[fan_off[:-1]] = 0.0
-        d = self.points[inside] - apex[pt_job]
-        phi_p = np.mod(np.arctan2(d[:, 1], d[:, 0]) - theta0[pt_job], 2 * np.pi)
-        # Sector boundaries of all jobs in one sorted array (8 > 2 pi apart).
-        g = np.searchsorted(fan_job * 8.0 + phi, pt_job * 8.0 + phi_p, side="right") - 1
-        guess = fans[np.clip(g, fan_off[pt_job], fan_off[pt_job + 1] - 1)]
-        ok = locate_pairs(coords_rows[:, guess], self._point_rows[:, inside])
+        fan_tri = fan_start[fan_job] + k
+        apex = coords[fan_start, 0]  # (J, 2): fan triangles are (apex, a, b)
+        d = coords[fan_start, 1] - apex
+        theta = _scoring.pseudo_angle(d[:, 0], d[:, 1])
+        d = coords[fan_tri, 1] - apex[fan_job]
+        phi = np.mod(_scoring.pseudo_angle(d[:, 0], d[:, 1]) - theta[fan_job], 4.0)
+        phi[job_fan[:-1]] = 0.0
+        ears = np.full((nj, _scoring.MAX_EARS), -1, np.int64)
+        few = n_flip <= _scoring.MAX_EARS
+        ej, k = ragged_index(np.where(few, n_flip, 0))
+        ears[ej, k] = tri_start[ej] + k
+
+        flat = _Flat(
+            cands=[], row_point=row_point, row_job=row_job, row_cand=row_cand, row_locate=row_locate,
+            row_tri=np.full(len(row_point), -1, np.int64), row_start=row_start, edge_start=edge_start,
+            tri_start=tri_start, edge_xy=edge_xy, edge_job=edge_job, tri_xy=coords_rows, tri_edges=tri_edges,
+            fan_key=fan_job * 8.0 + phi, fan_tri=fan_tri, job_fan=job_fan, job_apex=apex, job_theta=theta,
+            job_ears=ears, before=np.array([job[2][5] for job in jobs]), coords=coords, n_flip=n_flip)
+        if on_host:
+            self._locate_on_host(flat, np.arange(nj))
+        elif not few.all():
+            self._locate_on_host(flat, np.flatnonzero(~few))
+
+        for j, (plan, _t, _region, moved) in enumerate(jobs):
+            es = slice(edge_start[j], edge_start[j + 1])
+            rs = slice(row_start[j], row_start[j + 1])
+            cand = tri = None
+            if on_host:
+                cand = row_cand[rs] - edge_start[j]
+                tri = flat.row_tri[rs]
+            flat.cands.append(CandidateStencil(plan, ukeys[es], edge_xy[es], row_point[rs], int(n_in[j]),
+                                               float(flat.before[j]), moved, cand, tri))
+        return flat
+
+    def _locate_on_host(self, flat: "_Flat", jobs: np.ndarray) -> None:
+        """Locates the region points of ``jobs`` exactly, on the host.
+
+        Sets their ``row_cand`` and ``row_tri`` and clears ``row_locate``.
+
+        A guess first: the angular sector around the fan apex that the point
+        falls in (one ``searchsorted`` for all jobs). The exact test confirms
+        each guess; points it rejects (in an ear, near a sector boundary, on
+        the apex) are tested against every new triangle of their job. So the
+        answer is the exact perturbed location in every case, at about one
+        tested pair per point instead of ``deg - 2``.
+        """
+        in_job = np.zeros(len(flat.row_start) - 1, bool)
+        in_job[jobs] = True
+        rows = np.flatnonzero(flat.row_locate & in_job[flat.row_job])
+        if not len(rows):
+            return
+        inside = flat.row_point[rows]
+        pt_job = flat.row_job[rows]
+        tri_start = flat.tri_start
+        n_tri = np.diff(tri_start)
+        d = self.points[inside] - flat.job_apex[pt_job]
+        phi = np.mod(_scoring.pseudo_angle(d[:, 0], d[:, 1]) - flat.job_theta[pt_job], 4.0)
+        lo, hi = flat.job_fan[pt_job], flat.job_fan[pt_job + 1] - 1
+        g = np.clip(np.searchsorted(flat.fan_key, pt_job * 8.0 + phi, side="right") - 1, lo, hi)
+        guess = flat.fan_tri[g]
+        ok = locate_pairs(flat.tri_xy[:, guess], self._point_rows[:, inside])
         self.location_kernel_used |= len(inside) >= LOCATE_MIN_PAIRS
-        out[ok] = guess[ok]
+        found = np.where(ok, guess, -1)
         rest = np.flatnonzero(~ok)
         if len(rest):
             job = pt_job[rest]
             pair_pt, k = ragged_index(n_tri[job])
             pair_tri = tri_start[job][pair_pt] + k
-            hold = locate_pairs(coords_rows[:, pair_tri], self._point_rows[:, inside[rest[pair_pt]]])
+            hold = locate_pairs(flat.tri_xy[:, pair_tri], self._point_rows[:, inside[rest[pair_pt]]])
             self.location_kernel_used |= len(pair_pt) >= LOCATE_MIN_PAIRS
             hit = np.flatnonzero(hold)
             # The perturbed location is a partition: exactly one triangle each.
             if len(hit) != len(rest) or np.any(pair_pt[hit] != np.arange(len(rest))):
                 raise RuntimeError("a point of the star is not covered exactly once after the change")
-            out[rest] = pair_tri[hit]
-        return out
+            found[rest] = pair_tri[hit]
+        flat.row_cand[rows] = flat.tri_edges[found]
+        flat.row_tri[rows] = found - tri_start[pt_job]
+        flat.row_locate[rows] = False
 
-    def pack(self, cands: list[CandidateStencil]) -> EdgeStencil:
-        """Pads candidate stencils into one batch (see :class:`Buckets`).
+    def _flat_of(self, cands: list[CandidateStencil]) -> "_Flat":
+        """A flat batch of located candidates (from :meth:`candidates` and kin)."""
+        if any(c.cand is None for c in cands):
+            raise ValueError("candidates from export() are scored through dispatch(export)")
+        n_edges = np.array([len(c.keys) for c in cands], np.int64)
+        edge_start = np.concatenate([[0], np.cumsum(n_edges)])
+        n_rows = np.array([len(c.point_ids) for c in cands], np.int64)
+        row_job = np.repeat(np.arange(len(cands)), n_rows)
+        return _Flat.without_triangles(
+            np.concatenate([c.point_ids for c in cands]),
+            np.concatenate([c.cand for c in cands]) + edge_start[row_job][:, None], row_job,
+            np.concatenate([c.edges for c in cands]), np.repeat(np.arange(len(cands)), n_edges), cands,
+            before=np.array([c.before for c in cands]),
+            row_tri=np.concatenate([c.triangle_of_point for c in cands]))
 
-        The points and masses of all candidates are gathered in one go.
+    def dispatch(self, flat: "_Flat"):
+        """Pads ``flat`` and dispatches the scoring kernel; does not wait.
+
+        The kernel runs while the caller goes on (in the decimation loop,
+        exports the next chunk: on two cores the host and XLA work side by
+        side). :meth:`collect` gathers the results.
         """
-        ids = np.concatenate([c.point_ids for c in cands])
-        return pack_ragged(np.concatenate([c.edges for c in cands]), [len(c.keys) for c in cands],
-                           self.points[ids], self.mass[ids], np.concatenate([c.cand for c in cands]),
-                           [len(c.point_ids) for c in cands], self.buckets, self.dtype)
+        if not flat.cands:
+            return None
+        batch = flat.padded(self.points, self.mass)
+        self.shapes_seen.add(len(batch.row_mass))
+        self.n_kernel_calls += 1
+        with jax.enable_x64(True):
+            return _scoring.score_flat(batch, dtype=self.dtype)
 
-    def dispatch(self, cands: list[CandidateStencil]) -> list:
-        """Packs and dispatches the batches of ``cands``; does not wait.
+    def _run(self, flat: "_Flat"):
+        """Dispatches ``flat`` and waits: the kernel's outputs as host arrays,
+        cut to the batch's real rows, edges and jobs."""
+        out = jax.device_get(self.dispatch(flat))
+        total, per_edge, assignment, located, unresolved = out
+        nj, ne, nr = len(flat.row_start) - 1, len(flat.edge_job), len(flat.row_point)
+        return total[:nj], per_edge[:ne], assignment[:nr], located[:nr], unresolved[:nj]
 
-        The kernel of one batch runs while the next is packed (and, in the
-        decimation loop, while the next chunk is exported): on two cores the
-        host and XLA work side by side. :meth:`collect` gathers the results.
+    def collect(self, flat: "_Flat", pending) -> tuple[np.ndarray, list[CandidateCost]]:
+        """Results of :meth:`dispatch`: see :meth:`score`.
+
+        Jobs with a point the kernel could not locate (its filter unsure:
+        points on or within rounding of an edge, frequent on exactly
+        collinear input) are located on the host and scored again.
         """
-        if not cands:
-            return []
-        # Grow first: every batch then has the same edge capacity.
-        self.buckets.grow(max(len(c.keys) for c in cands))
-        pending = []
-        for batch in self.buckets.batches([len(c.point_ids) for c in cands]):
-            packed = self.pack([cands[i] for i in batch])
-            self.n_kernel_calls += 1
-            with jax.enable_x64(self.dtype == np.float64):
-                pending.append((batch, _cost.batched_stencil_cost_async(packed)))
-        return pending
+        if pending is None:
+            return np.zeros(0), []
+        nj, ne, nr = len(flat.row_start) - 1, len(flat.edge_job), len(flat.row_point)
+        total, per_edge, assignment, located, unresolved = jax.device_get(pending)
+        total, per_edge, assignment, located = total[:nj], per_edge[:ne], assignment[:nr], located[:nr]
+        bad = np.flatnonzero(unresolved[:nj])
+        if len(bad):
+            self._locate_on_host(flat, bad)
+            total, per_edge, assignment, located, _ = self._run(flat)
+        delta = total - flat.before
+        # Local numbering: flat edges minus the job's offset, likewise triangles.
+        assignment = assignment - flat.edge_start[flat.row_job]
+        triangle = np.where(flat.row_locate, located - flat.tri_start[flat.row_job], flat.row_tri)
+        fields = [per_edge[:, i] for i in range(6)]
+        fields[5] = fields[5] > 0
+        out = []
+        for j, c in enumerate(flat.cands):
+            es = slice(flat.edge_start[j], flat.edge_start[j + 1])
+            r0 = flat.row_start[j]
+            rs = slice(r0, flat.row_start[j + 1])
+            out.append(CandidateCost(float(delta[j]), *(f[es] for f in fields), assignment[rs],
+                                     triangle[r0:r0 + c.n_inside]))
+        return delta, out
 
-    def collect(self, cands: list[CandidateStencil], pending: list) -> tuple[np.ndarray, list]:
-        """Results of :meth:`dispatch`: see :meth:`score`."""
-        delta = np.zeros(len(cands))
-        rows: list = [None] * len(cands)
-        for batch, handle in pending:
-            res = _cost.stencil_cost_to_host(handle)
-            delta[batch] = np.asarray(res.total[: len(batch)]) - np.array([cands[i].before for i in batch])
-            for r, i in enumerate(batch):
-                rows[i] = (res, r)
-        return delta, rows
+    def score(self, cands: list[CandidateStencil]) -> tuple[np.ndarray, list[CandidateCost]]:
+        """Cost increase ``delta`` of each located candidate, batched.
 
-    def score(self, cands: list[CandidateStencil]) -> tuple[np.ndarray, list[tuple[object, int]]]:
-        """Cost increase ``delta`` of each candidate, batched.
-
-        Candidates are scored in as few kernel calls as the bucket capacities
-        allow (see :meth:`Buckets.batches`).
+        Candidates are scored in batches of about :data:`ROW_BUDGET` rows,
+        one kernel call each (see :meth:`score_batches`).
 
         Returns:
-          ``(delta (len(cands),), rows)``; ``rows[i] = (result, r)`` locates
-          candidate ``i`` in a kernel result, to pass to :meth:`apply`.
+          ``(delta (len(cands),), costs)``; ``costs[i]`` is the
+          :class:`CandidateCost` of candidate ``i``, to pass to :meth:`apply`.
         """
-        return self.collect(cands, self.dispatch(cands))
+        chunks, run, used = [], [], 0
+        for c in cands:
+            if run and used + len(c.point_ids) > ROW_BUDGET:
+                chunks.append(run)
+                run, used = [], 0
+            run.append(c)
+            used += len(c.point_ids)
+        if run:
+            chunks.append(run)
+        _, delta, costs = self.score_batches(self._flat_of(chunk) for chunk in chunks)
+        return delta, costs
+
+    def score_batches(self, flats) -> tuple[list[CandidateStencil], np.ndarray, list[CandidateCost]]:
+        """Scores an iterable of batches (e.g. :meth:`exports`), pipelined:
+        each batch is dispatched before the last one is collected.
+
+        Returns:
+          ``(cands, delta, costs)`` over all batches, in order.
+        """
+        cands, deltas, costs = [], [np.zeros(0)], []
+        pending = None
+        for flat in flats:
+            handle = self.dispatch(flat)
+            if pending is not None:
+                d, c = self.collect(*pending)
+                deltas.append(d)
+                costs += c
+                cands += pending[0].cands
+            pending = (flat, handle)
+        if pending is not None:
+            d, c = self.collect(*pending)
+            deltas.append(d)
+            costs += c
+            cands += pending[0].cands
+        return cands, np.concatenate(deltas), costs
 
     # ------------------------------------------------------------- mutation
-    def apply(self, cand: CandidateStencil, scored: tuple[object, int]) -> set[int]:
+    def apply(self, cand: CandidateStencil, scored: CandidateCost) -> set[int]:
         """Performs a scored change (collapse or relocation) and updates the plan.
 
         Args:
           cand: the candidate (exported against the current state).
-          scored: its ``(result, row)`` from :meth:`score`.
+          scored: its :class:`CandidateCost` from :meth:`score` or
+            :meth:`collect`.
 
         Returns:
           The *dirty* vertices: every half-edge leaving one of them has a
           stencil that overlaps the change and must be re-scored (paper,
           Fig. 6: the modified one-ring and its flap vertices).
         """
-        res, row = scored
         plan = cand.plan
         tri = self.tri
         if cand.moved is None:
@@ -583,23 +722,20 @@ class TransportPlan:
             new_ids = np.asarray(plan.star, np.int64)
         for v in plan.ring + (plan.source, plan.target):
             self._star_version[v] += 1
-        n_in = int((cand.triangle_of_point >= 0).sum())
-        inside = cand.point_ids[:n_in]
-        fid = new_ids[cand.triangle_of_point[:n_in]]
+        inside = cand.point_ids[:cand.n_inside]
+        fid = new_ids[scored.triangle]
         self.pt_face[inside] = fid
         for f in plan.star:
             self.face_pts[f] = np.zeros(0, np.int64)
         order = np.argsort(fid, kind="stable")
-        if n_in:
+        if len(inside):
             uf, st = np.unique(fid[order], return_index=True)
             for f, chunk in zip(uf, np.split(inside[order], st[1:])):
                 self.face_pts[int(f)] = chunk
-        assign = np.asarray(res.assignment[row, : len(cand.point_ids)])
-        self.pt_edge[cand.point_ids] = cand.keys[assign]
-        for i, (a, b) in enumerate(cand.keys):
-            k = (int(a), int(b))
-            self.edge_cost[k] = float(res.edge_cost[row, i])
-            self.edge_solid[k] = bool(res.solid[row, i])
+        self.pt_edge[cand.point_ids] = cand.keys[scored.assignment]
+        for k, c, solid in zip(map(tuple, cand.keys.tolist()), scored.edge_cost.tolist(), scored.solid.tolist()):
+            self.edge_cost[k] = c
+            self.edge_solid[k] = solid
         dirty = set(plan.ring)
         dirty.add(plan.target)
         for f in new_ids:
@@ -607,3 +743,93 @@ class TransportPlan:
                 if g >= 0:
                     dirty.update(tri.tri[g])
         return {v for v in dirty if tri.alive[v] and not tri.pinned[v]}
+
+
+@dataclass
+class _Flat:
+    """Host side of one flat batch: the candidates, their rows, edges and
+    triangles end to end (unpadded), and what reading the results needs.
+
+    See :class:`otjax.curves.scoring.FlatBatch` for the fields shared with
+    the kernel; the others: ``row_tri`` (local triangle of a row located on
+    the host, else ``-1``), ``row_start``, ``edge_start``, ``tri_start``
+    (``(J + 1,)`` offsets per job), ``before`` (``(J,)``), ``coords``
+    (``(T, 3, 2)`` new triangles) and ``n_flip`` (ears per job).
+    """
+
+    cands: list
+    row_point: np.ndarray
+    row_job: np.ndarray
+    row_cand: np.ndarray
+    row_locate: np.ndarray
+    row_tri: np.ndarray
+    row_start: np.ndarray
+    edge_start: np.ndarray
+    tri_start: np.ndarray
+    edge_xy: np.ndarray
+    edge_job: np.ndarray
+    tri_xy: np.ndarray
+    tri_edges: np.ndarray
+    fan_key: np.ndarray
+    fan_tri: np.ndarray
+    job_fan: np.ndarray
+    job_apex: np.ndarray
+    job_theta: np.ndarray
+    job_ears: np.ndarray
+    before: np.ndarray
+    coords: np.ndarray | None = None
+    n_flip: np.ndarray | None = None
+
+    @classmethod
+    def empty(cls) -> "_Flat":
+        return cls.without_triangles(_NO_IDS, np.zeros((0, 3), np.int64), _NO_IDS, np.zeros((0, 2, 2)),
+                                     _NO_IDS, [])
+
+    @classmethod
+    def without_triangles(cls, row_point, row_cand, row_job, edge_xy, edge_job, cands, before=None,
+                          row_tri=None) -> "_Flat":
+        """A batch whose every row comes with its candidate edges."""
+        nj = len(cands)
+        n = len(row_point)
+        return cls(
+            cands=cands, row_point=row_point, row_job=row_job, row_cand=row_cand,
+            row_locate=np.zeros(n, bool), row_tri=np.full(n, -1, np.int64) if row_tri is None else row_tri,
+            row_start=np.searchsorted(row_job, np.arange(nj + 1)),
+            edge_start=np.searchsorted(edge_job, np.arange(nj + 1)), tri_start=np.zeros(nj + 1, np.int64),
+            edge_xy=edge_xy, edge_job=edge_job, tri_xy=np.zeros((6, 0)), tri_edges=np.zeros((0, 3), np.int64),
+            fan_key=np.zeros(0), fan_tri=_NO_IDS, job_fan=np.zeros(nj + 1, np.int64), job_apex=np.zeros((nj, 2)),
+            job_theta=np.zeros(nj), job_ears=np.full((nj, _scoring.MAX_EARS), -1, np.int64),
+            before=np.zeros(nj) if before is None else before)
+
+    def padded(self, points: np.ndarray, mass: np.ndarray) -> _scoring.FlatBatch:
+        """The kernel's input: every array padded to :func:`scoring.capacity`.
+
+        Args:
+          points, mass: the plan's ``(n, 2)`` points and ``(n,)`` masses,
+            gathered here by row (cheaper than a kernel shape per ``n``).
+        """
+        nj, ne, nt, nr = len(self.job_theta), len(self.edge_job), len(self.tri_edges), len(self.row_point)
+        r = _scoring.capacity(nr, ne, nt, nj)
+        e = t = r // _scoring.EDGES_PER_ROW
+        j = r // _scoring.JOBS_PER_ROW
+        pad_job = j - 1
+
+        def fill(x, size, value, dtype):
+            out = np.full((size,) + np.shape(x)[1:], value, dtype)
+            out[: len(x)] = x
+            return out
+
+        tri_xy = np.zeros((6, t))
+        tri_xy[:, :nt] = self.tri_xy
+        job_fan = np.full(j + 1, len(self.fan_key), np.int32)
+        job_fan[: nj + 1] = self.job_fan
+        return _scoring.FlatBatch(
+            row_xy=fill(points[self.row_point], r, 0.0, np.float64),
+            row_mass=fill(mass[self.row_point], r, 0.0, np.float64), row_job=fill(self.row_job, r, pad_job, np.int32),
+            row_cand=fill(self.row_cand, r, 0, np.int32), row_locate=fill(self.row_locate, r, False, bool),
+            row_valid=fill(np.ones(nr, bool), r, False, bool), tri_xy=tri_xy,
+            tri_edges=fill(self.tri_edges, t, 0, np.int32), fan_key=fill(self.fan_key, t, np.inf, np.float64),
+            fan_tri=fill(self.fan_tri, t, 0, np.int32), job_fan=job_fan,
+            job_apex=fill(self.job_apex, j, 0.0, np.float64), job_theta=fill(self.job_theta, j, 0.0, np.float64),
+            job_ears=fill(self.job_ears, j, -1, np.int32), edge_xy=fill(self.edge_xy, e, 0.0, np.float64),
+            edge_valid=fill(np.ones(ne, bool), e, False, bool), edge_job=fill(self.edge_job, e, pad_job, np.int32))

@@ -75,7 +75,7 @@ def relocate(plan: TransportPlan, vertices, admissible=None) -> tuple[set[int], 
     Args:
       plan: the transport plan, modified in place.
       vertices: vertex ids (pinned and dead ones are skipped).
-      admissible: optional ``(candidate, result, row) -> bool`` veto (the
+      admissible: optional ``(candidate, cost) -> bool`` veto (the
         tolerance mode uses it).
 
     Returns:
@@ -89,10 +89,9 @@ def relocate(plan: TransportPlan, vertices, admissible=None) -> tuple[set[int], 
     while waiting:
         moves = [(v, pos) for v, pos in ((v, optimal_position(plan, v)) for v in waiting)
                  if pos is not None and np.all(np.isfinite(pos)) and np.any(pos != tri.xy[v])]
-        cands = plan.relocation_candidates(moves)
+        cands, delta, rows = plan.score_batches(plan.relocation_exports(moves))
         if not cands:
             break
-        delta, rows = plan.score(cands)
         blocked: set[int] = set()
         done: set[int] = set()
         for i in np.argsort(delta, kind="stable"):
@@ -103,7 +102,7 @@ def relocate(plan: TransportPlan, vertices, admissible=None) -> tuple[set[int], 
                 continue
             if v in blocked:
                 continue
-            if admissible is not None and not admissible(c, *rows[i]):
+            if admissible is not None and not admissible(c, rows[i]):
                 done.add(v)
                 continue
             # Stencils that overlap this move are stale: their vertices wait.
@@ -228,7 +227,7 @@ def refine(plan: TransportPlan, maxiter: int = 100, max_halvings: int = 6) -> tu
         except ValueError:
             step /= 2
             continue
-        new = TransportPlan(tri, plan.points, plan.mass, plan.buckets, plan.dtype, plan.max_source_degree)
+        new = TransportPlan(tri, plan.points, plan.mass, plan.dtype, plan.max_source_degree)
         after = new.total_cost()
         if after < before:
             info.update(accepted=True, cost_after=after, step=step)
