@@ -11,9 +11,12 @@ Public API (2D curves):
   transport plan, stencil batches, JAX cost kernels, decimation, relocation),
   for research code; see ``notebooks/``.
 - :mod:`otjax.stencil` -- padded stencil batches shared by the kernels.
+- :func:`enable_compilation_cache` -- keep compiled kernels on disk for
+  later processes (the command line does by default).
 """
 
 from otjax import curves, datasets, metrics, stencil
+from otjax.compile_cache import enable_compilation_cache
 from otjax.curves.reconstruct import reconstruct_curve
 from otjax.curves.result import CurveResult
 from otjax.io import image_to_points, read_points
@@ -22,6 +25,7 @@ __all__ = [
     "CurveResult",
     "curves",
     "datasets",
+    "enable_compilation_cache",
     "image_to_points",
     "metrics",
     "read_points",

@@ -16,6 +16,7 @@ import argparse
 import sys
 
 from otjax import datasets
+from otjax.compile_cache import default_cache_dir, enable_compilation_cache
 from otjax.curves.decimate import QUEUES
 from otjax.curves.reconstruct import reconstruct_curve
 from otjax.curves.result import SAVE_EXTENSIONS, check_save_path
@@ -81,6 +82,10 @@ def _curve_parser(sub) -> argparse.ArgumentParser:
         default=None,
         help="merge repeated points (summing masses) instead of refusing them",
     )
+    p.add_argument("--compile-cache", metavar="DIR",
+                   help="keep compiled kernels in DIR for later runs (default: $OTJAX_COMPILE_CACHE, "
+                   "else ~/.cache/otjax/jax)")
+    p.add_argument("--no-compile-cache", action="store_true", help="compile the kernels afresh, keep nothing")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.add_argument("--quiet", action="store_true", help="print nothing but errors")
     p.set_defaults(run=_run_curve, usage=p.error)  # p.error prints the usage and exits with status 2
@@ -161,6 +166,13 @@ def _run_curve(args, usage) -> int:
     pts, _ = check_points(points, masses, merge_duplicates=bool(kwargs.get("merge_duplicates")))
     if kwargs.get("n_vertices") is not None:
         check_target(kwargs["n_vertices"], len(pts))
+    cache = None if args.no_compile_cache else (args.compile_cache or default_cache_dir())
+    if cache is not None:
+        try:
+            enable_compilation_cache(cache)
+        except OSError as err:  # a read-only home costs compile time, not the run
+            if not args.quiet:
+                print(f"otjax: warning: no compile cache ({err})", file=sys.stderr)
     result = reconstruct_curve(points, masses, **kwargs)
     for path in outputs:
         result.save(path)

@@ -3,6 +3,10 @@
 import os
 
 os.environ.setdefault("JAX_PLATFORMS", "cpu")
+# The command line keeps compiled kernels in ~/.cache by default; in-process
+# CLI tests must not switch that on for the whole test session (JAX's setting
+# is global). tests/test_cli.py checks the cache in subprocesses.
+os.environ["OTJAX_COMPILE_CACHE"] = "off"
 
 import jax
 import numpy as np

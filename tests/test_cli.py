@@ -389,3 +389,30 @@ def test_end_to_end_circle(tmp_path, capsys):
     # A closed curve: every vertex has exactly two edges.
     np.testing.assert_array_equal(np.bincount(r.edges.ravel(), minlength=8), 2)
     assert d["params"]["n_vertices"] == 8
+
+
+def _cli(args, env):
+    return subprocess.run([sys.executable, "-m", "otjax", "curve", *args], check=False, capture_output=True,
+                          text=True, timeout=300, env=env)
+
+
+def test_compile_cache_is_written_then_reused_with_the_same_result(tmp_path):
+    """Default: kernels land in $XDG_CACHE_HOME/otjax/jax; a second run reads them back."""
+    env = {k: v for k, v in os.environ.items() if k != "OTJAX_COMPILE_CACHE"}
+    env["XDG_CACHE_HOME"] = str(tmp_path / "cache")
+    args = ["--example", "noisy-star", "--points", "300", "--quiet"]
+    first = _cli(args + ["-o", str(tmp_path / "a.json")], env)
+    assert first.returncode == 0, first.stderr
+    cache = tmp_path / "cache" / "otjax" / "jax"
+    entries = sorted(p.name for p in cache.iterdir())
+    assert entries, "no compiled kernel was cached"
+    second = _cli(args + ["-o", str(tmp_path / "b.json")], env)
+    assert second.returncode == 0, second.stderr
+    assert sorted(p.name for p in cache.iterdir()) == entries  # nothing new to compile
+    a, b = (json.loads((tmp_path / f"{k}.json").read_text()) for k in "ab")
+    assert a["vertices"] == b["vertices"] and a["edges"] == b["edges"]
+    # Opting out writes nothing.
+    env["XDG_CACHE_HOME"] = str(tmp_path / "other")
+    third = _cli(args + ["--no-compile-cache"], env)
+    assert third.returncode == 0, third.stderr
+    assert not (tmp_path / "other").exists()

@@ -142,6 +142,11 @@ class TransportPlan:
         # Collapse plans depend only on the stars of their two ends: cache
         # them, stamped with per-vertex versions bumped when a star changes.
         self._star_version = [0] * len(tri.xy)
+        # Regions (see _region) likewise, stamped with a version bumped for
+        # every vertex a change makes dirty (a superset of those whose region
+        # it touches: see apply).
+        self._region_version = [0] * len(tri.xy)
+        self._regions: dict[int, tuple] = {}
         self._plans: dict[tuple[int, int], tuple] = {}
         self.pt_face = self._initial_location()
         self.face_pts: list[np.ndarray] = [np.zeros(0, np.int64)] * len(tri.tri)
@@ -240,9 +245,10 @@ class TransportPlan:
         keys = np.asarray(keys, np.int64).reshape(-1, 2)
         if not len(keys):
             return np.zeros(0, bool)
-        uniq, inv = np.unique(keys, axis=0, return_inverse=True)
+        nv = len(self.tri.xy)
+        uniq, inv = np.unique(keys[:, 0] * nv + keys[:, 1], return_inverse=True)  # 1D: 10x faster than axis=0
         get = self.edge_solid.get
-        flags = np.fromiter((get((int(a), int(b)), False) for a, b in uniq), bool, len(uniq))
+        flags = np.fromiter((get((int(c // nv), int(c % nv)), False) for c in uniq), bool, len(uniq))
         return flags[inv.ravel()]
 
     def total_cost(self) -> float:
@@ -264,12 +270,15 @@ class TransportPlan:
     def _region(self, v: int):
         """What every change of the star of ``v`` shares (see :meth:`candidates`).
 
-        Returns ``(ring, star, inside, outside, outside_link, before)``: the
+        Cached until a change makes ``v`` dirty. Returns ``(ring, star, inside, outside, outside_link, before)``: the
         points in the star; the points of the faces across the link edges that
         are assigned to those edges, with the link edge index ``k`` (edge
         ``(ring[k], ring[k+1])``) of each; and the cost of every edge of the
         star (spokes and link), which is what any change of the star replaces.
         """
+        hit = self._regions.get(v)
+        if hit is not None and hit[0] == self._region_version[v]:
+            return hit[1]
         tri = self.tri
         ring, star = tri.star(v)
         n = len(ring)
@@ -291,9 +300,11 @@ class TransportPlan:
         r = np.asarray(ring, np.int64)
         nxt = np.asarray(ring[1:] + ring[:1], np.int64)
         lo, hi = np.minimum(r, nxt), np.maximum(r, nxt)
-        e = self.pt_edge[ids]
+        e = np.take(self.pt_edge, ids, axis=0)
         keep = (e[:, 0] == lo[link]) & (e[:, 1] == hi[link])
-        return ring, star, inside, ids[keep], link[keep], before
+        region = ring, star, inside, ids[keep], link[keep], before
+        self._regions[v] = (self._region_version[v], region)
+        return region
 
     def exports(self, sources, targets: dict | None = None, budget: int = ROW_BUDGET):
         """Yields :meth:`export` batches of the half-edges leaving ``sources``.
@@ -553,7 +564,7 @@ class TransportPlan:
         pt_job = flat.row_job[rows]
         tri_start = flat.tri_start
         n_tri = np.diff(tri_start)
-        d = self.points[inside] - flat.job_apex[pt_job]
+        d = np.take(self.points, inside, axis=0) - flat.job_apex[pt_job]
         phi = np.mod(_scoring.pseudo_angle(d[:, 0], d[:, 1]) - flat.job_theta[pt_job], 4.0)
         lo, hi = flat.job_fan[pt_job], flat.job_fan[pt_job + 1] - 1
         g = np.clip(np.searchsorted(flat.fan_key, pt_job * 8.0 + phi, side="right") - 1, lo, hi)
@@ -601,11 +612,11 @@ class TransportPlan:
         """
         if not flat.cands:
             return None
-        batch = flat.padded(self.points, self.mass)
-        self.shapes_seen.add(len(batch.row_mass))
+        r, floats, ints = flat.packed(self.points, self.mass)
+        self.shapes_seen.add(r)
         self.n_kernel_calls += 1
         with jax.enable_x64(True):
-            return _scoring.score_flat(batch, dtype=self.dtype)
+            return _scoring.score_packed(floats, ints, rows=r, dtype=self.dtype)
 
     def _run(self, flat: "_Flat"):
         """Dispatches ``flat`` and waits: the kernel's outputs as host arrays,
@@ -732,16 +743,22 @@ class TransportPlan:
             uf, st = np.unique(fid[order], return_index=True)
             for f, chunk in zip(uf, np.split(inside[order], st[1:])):
                 self.face_pts[int(f)] = chunk
-        self.pt_edge[cand.point_ids] = cand.keys[scored.assignment]
+        self.pt_edge[cand.point_ids] = np.take(cand.keys, scored.assignment, axis=0)
         for k, c, solid in zip(map(tuple, cand.keys.tolist()), scored.edge_cost.tolist(), scored.solid.tolist()):
             self.edge_cost[k] = c
             self.edge_solid[k] = solid
+        # The vertices of the new triangles and of the triangles next to them:
+        # every vertex whose star, faces across its link, their points or the
+        # costs of its star's edges have changed.
         dirty = set(plan.ring)
         dirty.add(plan.target)
         for f in new_ids:
             for g in tri.nbr[f]:
                 if g >= 0:
                     dirty.update(tri.tri[g])
+        for v in dirty:
+            self._region_version[v] += 1
+        self._regions.pop(plan.source, None)
         return {v for v in dirty if tri.alive[v] and not tri.pinned[v]}
 
 
@@ -801,8 +818,9 @@ class _Flat:
             job_theta=np.zeros(nj), job_ears=np.full((nj, _scoring.MAX_EARS), -1, np.int64),
             before=np.zeros(nj) if before is None else before)
 
-    def padded(self, points: np.ndarray, mass: np.ndarray) -> _scoring.FlatBatch:
-        """The kernel's input: every array padded to :func:`scoring.capacity`.
+    def packed(self, points: np.ndarray, mass: np.ndarray) -> tuple[int, np.ndarray, np.ndarray]:
+        """The kernel's input: ``(R, floats, ints)``, padded to
+        :func:`scoring.capacity` and packed by :func:`scoring.layout`.
 
         Args:
           points, mass: the plan's ``(n, 2)`` points and ``(n,)`` masses,
@@ -810,26 +828,36 @@ class _Flat:
         """
         nj, ne, nt, nr = len(self.job_theta), len(self.edge_job), len(self.tri_edges), len(self.row_point)
         r = _scoring.capacity(nr, ne, nt, nj)
-        e = t = r // _scoring.EDGES_PER_ROW
-        j = r // _scoring.JOBS_PER_ROW
-        pad_job = j - 1
+        where = _scoring.layout(r)
+        floats = np.zeros(where["_sizes"][0])
+        ints = np.zeros(where["_sizes"][1], np.int32)
+        pad_job = r // _scoring.JOBS_PER_ROW - 1
 
-        def fill(x, size, value, dtype):
-            out = np.full((size,) + np.shape(x)[1:], value, dtype)
-            out[: len(x)] = x
-            return out
+        def view(name):
+            is_float, offset, shape = where[name]
+            return (floats if is_float else ints)[offset: offset + int(np.prod(shape))].reshape(shape)
 
-        tri_xy = np.zeros((6, t))
-        tri_xy[:, :nt] = self.tri_xy
-        job_fan = np.full(j + 1, len(self.fan_key), np.int32)
-        job_fan[: nj + 1] = self.job_fan
-        return _scoring.FlatBatch(
-            row_xy=fill(points[self.row_point], r, 0.0, np.float64),
-            row_mass=fill(mass[self.row_point], r, 0.0, np.float64), row_job=fill(self.row_job, r, pad_job, np.int32),
-            row_cand=fill(self.row_cand, r, 0, np.int32), row_locate=fill(self.row_locate, r, False, bool),
-            row_valid=fill(np.ones(nr, bool), r, False, bool), tri_xy=tri_xy,
-            tri_edges=fill(self.tri_edges, t, 0, np.int32), fan_key=fill(self.fan_key, t, np.inf, np.float64),
-            fan_tri=fill(self.fan_tri, t, 0, np.int32), job_fan=job_fan,
-            job_apex=fill(self.job_apex, j, 0.0, np.float64), job_theta=fill(self.job_theta, j, 0.0, np.float64),
-            job_ears=fill(self.job_ears, j, -1, np.int32), edge_xy=fill(self.edge_xy, e, 0.0, np.float64),
-            edge_valid=fill(np.ones(ne, bool), e, False, bool), edge_job=fill(self.edge_job, e, pad_job, np.int32))
+        # np.take: ~10x faster than fancy indexing for row gathers (measured).
+        view("row_xy")[:nr] = np.take(points, self.row_point, axis=0)
+        view("row_mass")[:nr] = np.take(mass, self.row_point)
+        view("row_job")[:] = pad_job
+        view("row_job")[:nr] = self.row_job
+        view("row_cand")[:nr] = self.row_cand
+        view("row_locate")[:nr] = self.row_locate
+        view("row_valid")[:nr] = 1
+        view("tri_xy")[:, :nt] = self.tri_xy
+        view("tri_edges")[:nt] = self.tri_edges
+        view("fan_key")[:] = np.inf
+        view("fan_key")[: len(self.fan_key)] = self.fan_key
+        view("fan_tri")[: len(self.fan_tri)] = self.fan_tri
+        view("job_fan")[:] = len(self.fan_key)
+        view("job_fan")[: nj + 1] = self.job_fan
+        view("job_apex")[:nj] = self.job_apex
+        view("job_theta")[:nj] = self.job_theta
+        view("job_ears")[:] = -1
+        view("job_ears")[:nj] = self.job_ears
+        view("edge_xy")[:ne] = self.edge_xy
+        view("edge_valid")[:ne] = 1
+        view("edge_job")[:] = pad_job
+        view("edge_job")[:ne] = self.edge_job
+        return r, floats, ints

@@ -41,14 +41,14 @@ def optimal_position(plan: TransportPlan, v: int) -> np.ndarray | None:
     ids = np.concatenate([plan.face_pts[f] for f in star])
     if not len(ids):
         return None
-    keys = plan.pt_edge[ids]
+    keys = np.take(plan.pt_edge, ids, axis=0)
     touch = (keys[:, 0] == v) | (keys[:, 1] == v)
     ids, keys = ids[touch], keys[touch]
     if not len(ids):
         return None
     other = np.where(keys[:, 0] == v, keys[:, 1], keys[:, 0])
     solid = plan.solid_of(keys)
-    p, m = plan.points[ids], plan.mass[ids]
+    p, m = np.take(plan.points, ids, axis=0), plan.mass[ids]
     x, b = tri.xy[v], tri.xy[other]
     d = b - x
     lam = np.einsum("ij,ij->i", p - x, d) / np.einsum("ij,ij->i", d, d)
