@@ -9,6 +9,12 @@ compilation and reports its own peak resident memory, as a user's would.
     python scripts/bench_curves.py --sizes 1000 --repeats 1 --json out.json
     python scripts/bench_curves.py --queues multiple-choice --plot docs/bench_curves.png
     python scripts/bench_curves.py --from-json docs/bench/*.json --plot docs/bench/time_vs_n.png
+    python scripts/bench_curves.py --sizes 50000 --queues multiple-choice --compile-cache /tmp/cache
+
+Runs are cold by default: every process compiles its kernels. With
+``--compile-cache DIR`` each (size, queue) first runs once untimed to fill the
+persistent compilation cache in DIR (what the command line keeps in
+~/.cache/otjax), and the timed runs then read their kernels from it.
 
 Prints a table and the fit ``time ~ n^k`` between 10k and 1M points, and writes
 JSON (``--json``). Runs of sizes up to ``--median-up-to`` are repeated
@@ -47,7 +53,7 @@ def make_input(n: int, seed: int):
     return datasets.with_outliers(pts, truth, n_out, seed=seed + 1)
 
 
-def run_one(n: int, queue: str, seed: int) -> dict:
+def run_one(n: int, queue: str, seed: int, cache: str | None = None) -> dict:
     """One reconstruction in this process; returns its measurements."""
     import resource
     import time
@@ -56,6 +62,9 @@ def run_one(n: int, queue: str, seed: int) -> dict:
 
     import otjax
     from otjax import metrics
+
+    if cache:
+        otjax.enable_compilation_cache(cache)
 
     compile_s = [0.0]
 
@@ -94,14 +103,15 @@ def run_one(n: int, queue: str, seed: int) -> dict:
         "n_vertices": len(result.vertices), "n_edges": len(result.edges),
         "corner_error_mean": float(np.mean(corner)) if len(truth["corners"]) <= len(result.vertices) else None,
         "backend": jax.default_backend(),
+        "compile_cache": "warm" if cache else "cold",
     }
 
 
-def run_child(n: int, queue: str, seed: int, timeout: float) -> dict:
+def run_child(n: int, queue: str, seed: int, timeout: float, cache: str | None = None) -> dict:
     """Runs :func:`run_one` in a fresh interpreter (own compile, own peak RSS)."""
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp) / "run.json"
-        cmd = [sys.executable, __file__, "--child", str(n), queue, str(seed), str(out)]
+        cmd = [sys.executable, __file__, "--child", str(n), queue, str(seed), str(out), cache or ""]
         try:
             proc = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout, check=False)
         except subprocess.TimeoutExpired:
@@ -131,7 +141,7 @@ def table(rows: list[dict]) -> str:
             continue
         sp = r["split"]
         lines.append(
-            f"| {r['n']} | {r['queue']} | {r['target']} | {r['initial_vertices']} | {r['seconds']:.2f} | "
+            f"| {r['n']} | {r['queue']}{' (warm cache)' if r.get('compile_cache') == 'warm' else ''} | {r['target']} | {r['initial_vertices']} | {r['seconds']:.2f} | "
             f"{sp['init']:.2f} / {sp['scoring']:.2f} / {sp['topology']:.2f} / {sp['relocation']:.2f} | "
             f"{r['collapses_per_second']:.0f} | {r['rounds']} | {r['compiled_shapes']} | "
             f"{r['compile_seconds']:.2f} | {r['peak_rss_mib']:.0f} | {r['total_cost']:.6g} |")
@@ -163,8 +173,8 @@ def plot(rows: list[dict], path: Path) -> None:
 
 def main(argv=None) -> int:
     if argv is None and len(sys.argv) > 1 and sys.argv[1] == "--child":
-        n, queue, seed, out = sys.argv[2:6]
-        result = run_one(int(n), queue, int(seed))
+        n, queue, seed, out, cache = sys.argv[2:7]
+        result = run_one(int(n), queue, int(seed), cache or None)
         Path(out).write_text(json.dumps(result))
         return 0
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -174,6 +184,8 @@ def main(argv=None) -> int:
     ap.add_argument("--median-up-to", type=int, default=50_000)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--timeout", type=float, default=1800.0, help="seconds per run")
+    ap.add_argument("--compile-cache", metavar="DIR",
+                    help="warm runs: fill a persistent compilation cache in DIR first (one untimed run)")
     ap.add_argument("--json", type=Path, help="write the rows here")
     ap.add_argument("--plot", type=Path, help="write a log-log plot of time vs n here")
     ap.add_argument("--from-json", type=Path, nargs="+", metavar="JSON",
@@ -193,7 +205,9 @@ def main(argv=None) -> int:
     for n in sorted(args.sizes):
         for queue in args.queues:
             reps = args.repeats if n <= args.median_up_to else 1
-            runs = [run_child(n, queue, args.seed, args.timeout) for _ in range(reps)]
+            if args.compile_cache:
+                run_child(n, queue, args.seed, args.timeout, args.compile_cache)  # fills the cache
+            runs = [run_child(n, queue, args.seed, args.timeout, args.compile_cache) for _ in range(reps)]
             ok = sorted((r for r in runs if "seconds" in r), key=lambda r: r["seconds"])
             row = ok[len(ok) // 2] if ok else runs[0]
             row["repeats"] = len(ok)

@@ -25,6 +25,7 @@ def test_bench_curves_smallest_size(tmp_path):
         assert 0 < r["compile_seconds"] < r["seconds"]
         assert 1 <= r["compiled_shapes"] <= 12
         assert r["peak_rss_mib"] > 0 and r["total_cost"] > 0
+        assert r["compile_cache"] == "cold"  # every run compiles unless --compile-cache is given
     assert doc["fit_10k_1M"] == {"exhaustive": None, "multiple-choice": None, "parallel": None}
 
 
