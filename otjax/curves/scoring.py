@@ -202,21 +202,29 @@ def _locate(batch: FlatBatch, px, py, need):
     loc = jnp.where(ok, guess, -1)
 
     # Second test, on the compacted rows whose guess failed: the sectors on
-    # either side (rounding of the pseudo-angles) and the ears.
+    # either side (rounding of the pseudo-angles) and the ears. Compacted by
+    # a cumulative sum (jnp.nonzero compiled 0.2 s slower), tested one
+    # candidate triangle at a time in a loop (a (K, 6) block compiled 0.3 s
+    # slower per shape, for the same work).
     n_rows = need.shape[0]
-    retry = jnp.nonzero(need & ~ok, size=n_rows // RETRY_PER_ROW, fill_value=n_rows)[0]
-    rj = job[jnp.minimum(retry, n_rows - 1)]
-    rg = g[jnp.minimum(retry, n_rows - 1)]
+    k_rows = n_rows // RETRY_PER_ROW
+    failed = need & ~ok
+    slot = jnp.where(failed, jnp.cumsum(failed) - 1, k_rows)
+    retry = jnp.full(k_rows, n_rows, jnp.int32).at[slot].set(jnp.arange(n_rows, dtype=jnp.int32), mode="drop")
+    r = jnp.minimum(retry, n_rows - 1)
+    rj, rg, qx, qy = job[r], g[r], px[r], py[r]
     rlo, rhi = batch.job_fan[rj], batch.job_fan[rj + 1] - 1
     width = jnp.maximum(rhi - rlo + 1, 1)
     sides = [batch.fan_tri[rlo + jnp.mod(rg - rlo + k, width)] for k in (-1, 1)]
     tris = jnp.stack(sides + [batch.job_ears[rj, k] for k in range(MAX_EARS)], 1)  # (K, 2 + MAX_EARS)
-    valid = (tris >= 0) & (rhi >= rlo)[:, None]
-    tris = jnp.maximum(tris, 0)
-    qx = px[jnp.minimum(retry, n_rows - 1)][:, None]
-    qy = py[jnp.minimum(retry, n_rows - 1)][:, None]
-    inside = valid & (in_triangle_rows(batch.tri_xy[:, tris], qx, qy) == INSIDE)
-    found = jnp.where(inside.any(1), jnp.take_along_axis(tris, jnp.argmax(inside, 1)[:, None], 1)[:, 0], -1)
+    tris = jnp.where((rhi >= rlo)[:, None], tris, -1)
+
+    def test(k, found):
+        t = jax.lax.dynamic_index_in_dim(tris, k, 1, keepdims=False)
+        hit = (t >= 0) & (in_triangle_rows(batch.tri_xy[:, jnp.maximum(t, 0)], qx, qy) == INSIDE)
+        return jnp.where((found < 0) & hit, t, found)
+
+    found = jax.lax.fori_loop(0, tris.shape[1], test, jnp.full(k_rows, -1, tris.dtype))
     return loc.at[retry].set(found, mode="drop")
 
 
