@@ -218,8 +218,9 @@ class TransportPlan:
         first = 0
         while first < len(starts):
             rows = np.cumsum(counts[first:])
-            last = first + max(1, int(np.searchsorted(rows, 4 * ROW_BUDGET, side="right")))
-            last = min(last, first + ROW_BUDGET)
+            # Within the capacity the decimation loop uses anyway: no shape of its own.
+            last = first + max(1, int(np.searchsorted(rows, ROW_BUDGET, side="right")))
+            last = min(last, first + ROW_BUDGET // _scoring.EDGES_PER_ROW - 1)
             ids = order[starts[first]: starts[last - 1] + counts[last - 1]]
             edge_of_row = np.repeat(np.arange(last - first), counts[first:last])
             flat = _Flat.without_triangles(
