@@ -444,46 +444,6 @@ batched_stencil_cost = _batched(DEFAULT_TANGENTIAL_METHOD)
 """Batched :func:`stencil_cost` with the default method: ``EdgeStencil`` with
 leading ``B`` axis -> :class:`StencilCost` with leading ``B`` axis."""
 
-_EDGE_FIELDS = ("edge_cost", "normal", "tangential", "vertex", "edge_mass", "solid")
-
-
-@jax.jit
-def _batched_packed(stencil: EdgeStencil):
-    res = jax.vmap(stencil_cost)(stencil)
-    per_edge = jnp.stack([getattr(res, k).astype(res.total.dtype) for k in _EDGE_FIELDS], -1)
-    return res.total, per_edge, res.assignment
-
-
-def batched_stencil_cost_async(stencil: EdgeStencil):
-    """Dispatches :data:`batched_stencil_cost` without waiting for it.
-
-    Returns:
-      An opaque handle for :func:`stencil_cost_to_host`. JAX runs the kernel
-      while the caller goes on (e.g. packs the next batch).
-    """
-    return _batched_packed(stencil)
-
-
-def stencil_cost_to_host(handle) -> StencilCost:
-    """Waits for a dispatched kernel; its :class:`StencilCost` as NumPy arrays.
-
-    The eight fields of :class:`StencilCost` cost one device-to-host copy
-    each (~20 us apiece on CPU, measured); the per-edge fields travel as one
-    ``(B, E, 6)`` array instead, unpacked here into views.
-    """
-    total, per_edge, assignment = jax.device_get(handle)
-    fields = {k: per_edge[..., i] for i, k in enumerate(_EDGE_FIELDS)}
-    fields["solid"] = fields["solid"] > 0
-    return StencilCost(total=total, assignment=assignment, **fields)
-
-
-def batched_stencil_cost_host(stencil: EdgeStencil) -> StencilCost:
-    """:data:`batched_stencil_cost`, brought back to NumPy in three transfers.
-
-    Returns:
-      A :class:`StencilCost` of NumPy arrays (``solid`` as bool).
-    """
-    return stencil_cost_to_host(batched_stencil_cost_async(stencil))
 
 
 def fixed_assignment_cost(vertices: jax.Array, edge_index: jax.Array, points: jax.Array,

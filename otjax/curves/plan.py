@@ -359,7 +359,7 @@ class TransportPlan:
                     jobs.append((plan, np.asarray(plan.new_triangles, np.int64), region, None))
         return jobs
 
-    def export(self, sources, targets: dict | None = None) -> "_Flat":
+    def export(self, sources, targets: dict | None = None) -> _Flat:
         """Exports the half-edges leaving ``sources`` as one flat batch, unlocated.
 
         What :meth:`candidates` does, except that the points of each changed
@@ -440,7 +440,7 @@ class TransportPlan:
         out = self.relocation_candidates([(v, position)])
         return out[0] if out else None
 
-    def _export(self, jobs, on_host: bool) -> "_Flat":
+    def _export(self, jobs, on_host: bool) -> _Flat:
         """Builds the flat batch of ``(plan, triangles, region, moved)`` jobs.
 
         Everything is done on concatenated arrays over all jobs (edge keys,
@@ -527,7 +527,7 @@ class TransportPlan:
             row_tri=np.full(len(row_point), -1, np.int64), row_start=row_start, edge_start=edge_start,
             tri_start=tri_start, edge_xy=edge_xy, edge_job=edge_job, tri_xy=coords_rows, tri_edges=tri_edges,
             fan_key=fan_job * 8.0 + phi, fan_tri=fan_tri, job_fan=job_fan, job_apex=apex, job_theta=theta,
-            job_ears=ears, before=np.array([job[2][5] for job in jobs]), coords=coords, n_flip=n_flip)
+            job_ears=ears, before=np.array([job[2][5] for job in jobs]))
         if on_host:
             self._locate_on_host(flat, np.arange(nj))
         elif not few.all():
@@ -544,7 +544,7 @@ class TransportPlan:
                                                float(flat.before[j]), moved, cand, tri))
         return flat
 
-    def _locate_on_host(self, flat: "_Flat", jobs: np.ndarray) -> None:
+    def _locate_on_host(self, flat: _Flat, jobs: np.ndarray) -> None:
         """Locates the region points of ``jobs`` exactly, on the host.
 
         Sets their ``row_cand`` and ``row_tri`` and clears ``row_locate``.
@@ -589,7 +589,7 @@ class TransportPlan:
         flat.row_tri[rows] = found - tri_start[pt_job]
         flat.row_locate[rows] = False
 
-    def _flat_of(self, cands: list[CandidateStencil]) -> "_Flat":
+    def _flat_of(self, cands: list[CandidateStencil]) -> _Flat:
         """A flat batch of located candidates (from :meth:`candidates` and kin)."""
         if any(c.cand is None for c in cands):
             raise ValueError("candidates from export() are scored through dispatch(export)")
@@ -604,7 +604,7 @@ class TransportPlan:
             before=np.array([c.before for c in cands]),
             row_tri=np.concatenate([c.triangle_of_point for c in cands]))
 
-    def dispatch(self, flat: "_Flat"):
+    def dispatch(self, flat: _Flat):
         """Pads ``flat`` and dispatches the scoring kernel; does not wait.
 
         The kernel runs while the caller goes on (in the decimation loop,
@@ -619,7 +619,7 @@ class TransportPlan:
         with jax.enable_x64(True):
             return _scoring.score_packed(floats, ints, rows=r, dtype=self.dtype)
 
-    def _run(self, flat: "_Flat"):
+    def _run(self, flat: _Flat):
         """Dispatches ``flat`` and waits: the kernel's outputs as host arrays,
         cut to the batch's real rows, edges and jobs."""
         out = jax.device_get(self.dispatch(flat))
@@ -627,7 +627,7 @@ class TransportPlan:
         nj, ne, nr = len(flat.row_start) - 1, len(flat.edge_job), len(flat.row_point)
         return total[:nj], per_edge[:ne], assignment[:nr], located[:nr], unresolved[:nj]
 
-    def collect(self, flat: "_Flat", pending) -> tuple[np.ndarray, list[CandidateCost]]:
+    def collect(self, flat: _Flat, pending) -> tuple[np.ndarray, list[CandidateCost]]:
         """Results of :meth:`dispatch`: see :meth:`score`.
 
         Jobs with a point the kernel could not locate (its filter unsure:
@@ -771,8 +771,8 @@ class _Flat:
     See :class:`otjax.curves.scoring.FlatBatch` for the fields shared with
     the kernel; the others: ``row_tri`` (local triangle of a row located on
     the host, else ``-1``), ``row_start``, ``edge_start``, ``tri_start``
-    (``(J + 1,)`` offsets per job), ``before`` (``(J,)``), ``coords``
-    (``(T, 3, 2)`` new triangles) and ``n_flip`` (ears per job).
+    (``(J + 1,)`` offsets per job) and ``before`` (``(J,)``). Unpadded and
+    with ids of any width: :meth:`packed` pads and narrows them.
     """
 
     cands: list
@@ -795,17 +795,15 @@ class _Flat:
     job_theta: np.ndarray
     job_ears: np.ndarray
     before: np.ndarray
-    coords: np.ndarray | None = None
-    n_flip: np.ndarray | None = None
 
     @classmethod
-    def empty(cls) -> "_Flat":
+    def empty(cls) -> _Flat:
         return cls.without_triangles(_NO_IDS, np.zeros((0, 3), np.int64), _NO_IDS, np.zeros((0, 2, 2)),
                                      _NO_IDS, [])
 
     @classmethod
     def without_triangles(cls, row_point, row_cand, row_job, edge_xy, edge_job, cands, before=None,
-                          row_tri=None) -> "_Flat":
+                          row_tri=None) -> _Flat:
         """A batch whose every row comes with its candidate edges."""
         nj = len(cands)
         n = len(row_point)

@@ -36,10 +36,12 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from otjax.curves.cost import _EDGE_FIELDS, stencil_cost
+from otjax.curves.cost import stencil_cost
 from otjax.curves.location import INSIDE, in_triangle_rows
 from otjax.stencil import EdgeStencil
 
+# Per-edge outputs, in the order of the kernel's (E, 6) array.
+EDGE_FIELDS = ("edge_cost", "normal", "tangential", "vertex", "edge_mass", "solid")
 # Smallest row capacity; every other capacity is a fixed fraction of it, so
 # that one number (a power of two) names a compiled shape.
 MIN_ROWS = 1 << 12
@@ -239,7 +241,7 @@ def score_flat(batch: FlatBatch, dtype=jnp.float64):
     Returns:
       ``(total (J,), per_edge (E, 6), assignment (R,), located (R,),
       unresolved (J,))``: each job's cost after the change; per edge, the
-      fields ``_EDGE_FIELDS`` of :class:`~otjax.curves.cost.StencilCost`;
+      fields ``EDGE_FIELDS`` of :class:`~otjax.curves.cost.StencilCost`;
       each row's flat edge (``-1`` on padding); each located row's flat
       triangle (``-1`` elsewhere); and per job, how many of its rows the
       kernel could not locate (its costs are then meaningless).
@@ -255,7 +257,7 @@ def score_flat(batch: FlatBatch, dtype=jnp.float64):
                                    batch.row_valid, cand), "sort")
     n_jobs = batch.job_theta.shape[0]
     total = jax.ops.segment_sum(res.edge_cost, batch.edge_job, num_segments=n_jobs)
-    per_edge = jnp.stack([getattr(res, k).astype(dtype) for k in _EDGE_FIELDS], -1)
+    per_edge = jnp.stack([getattr(res, k).astype(dtype) for k in EDGE_FIELDS], -1)
     bad = jax.ops.segment_sum(unresolved.astype(jnp.int32), batch.row_job, num_segments=n_jobs)
     return total, per_edge, res.assignment, loc, bad
 
