@@ -17,10 +17,14 @@ Transport plan (Python bookkeeping around the JAX kernel):
 - :class:`TransportPlan` -- points located in triangles, assigned to edges,
   cached per-edge costs; exports candidate stencils
   (:meth:`TransportPlan.candidates`), scores them in batches
-  (:meth:`TransportPlan.score`) and applies them (:meth:`TransportPlan.apply`).
-- :class:`CandidateStencil` -- one exported candidate.
+  (:meth:`TransportPlan.score`) and applies them (:meth:`TransportPlan.apply`);
+  the decimation loop's fast path exports flat batches
+  (:meth:`TransportPlan.exports`) located and scored by one fused kernel
+  (:meth:`TransportPlan.score_batches`, :mod:`otjax.curves.scoring`).
+- :class:`CandidateStencil`, :class:`CandidateCost` -- one exported candidate
+  and its scored outcome.
 
-Stencil batches (the padded arrays between the two):
+Stencil batches (the padded arrays of the public batched kernel):
 
 - :class:`EdgeStencil`, :class:`Buckets`, :func:`pack_edge_stencils`.
 
@@ -67,7 +71,7 @@ from otjax.curves.cost import (
     stencil_cost,
 )
 from otjax.curves.decimate import QUEUES, DecimationStats, decimate, within_tolerance
-from otjax.curves.plan import CandidateStencil, TransportPlan
+from otjax.curves.plan import CandidateCost, CandidateStencil, TransportPlan
 from otjax.curves.reconstruct import default_initial_vertices, reconstruct_curve
 from otjax.curves.relocation import minimize_lbfgs, optimal_position, refine, relocate
 from otjax.curves.result import CurveResult
@@ -77,6 +81,7 @@ from otjax.stencil import Buckets, EdgeStencil, pack_edge_stencils
 __all__ = [
     "QUEUES",
     "Buckets",
+    "CandidateCost",
     "CandidateStencil",
     "CollapsePlan",
     "CurveResult",
