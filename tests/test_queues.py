@@ -118,24 +118,6 @@ def test_fused_kernel_equals_host_location_and_the_plain_kernel(seed):
     assert_costs_match(located, costs2, ref)
 
 
-def test_retry_overflow_is_scored_again_with_every_row_retried():
-    """More failed guesses than the retry takes: collect re-runs the batch."""
-    plan = make_plan(np.random.default_rng(6))
-    sources = np.nonzero(plan.tri.alive & ~plan.tri.pinned)[0].tolist()
-    flats = list(plan.exports(sources))
-    want = [plan.collect(f, plan.dispatch(f)) for f in flats]
-    overflowed = 0
-    for f, (d_want, c_want) in zip(flats, want):
-        pending = plan.dispatch(f, retry_per_row=1 << 20)  # room for no retried row at all
-        overflowed += bool(np.asarray(pending[5]))
-        d_got, c_got = plan.collect(f, pending)
-        np.testing.assert_array_equal(d_got, d_want)
-        for g, w in zip(c_got, c_want):
-            np.testing.assert_array_equal(g.triangle, w.triangle)
-            np.testing.assert_array_equal(g.assignment, w.assignment)
-    assert overflowed  # the case was exercised
-
-
 def test_fused_kernel_on_collinear_data_falls_back_exactly():
     """Points exactly on edges: the kernel's filter is unsure, the host decides."""
     pts = make_points("grid", 64, 0)

@@ -137,7 +137,7 @@ class TransportPlan:
         self.dtype = dtype
         self.n_kernel_calls = 0
         self.location_kernel_used = False
-        self.shapes_seen: set[tuple[int, int]] = set()  # (row capacity, retry divisor) compiled
+        self.shapes_seen: set[int] = set()  # row capacities of the scoring kernel
         self.max_source_degree = max_source_degree
         # Collapse plans depend only on the stars of their two ends: cache
         # them, stamped with per-vertex versions bumped when a star changes.
@@ -226,7 +226,8 @@ class TransportPlan:
             flat = _Flat.without_triangles(
                 ids, np.repeat(edge_of_row[:, None], 3, 1), np.zeros(len(ids), np.int64),
                 xy[ends[first:last]], np.zeros(last - first, np.int64), [None])
-            _total, per_edge, *_ = self._run(flat)
+            total, per_edge, *_ = self._run(flat)
+            del total
             for i, (u, v) in enumerate(ends[first:last].tolist()):
                 self.edge_cost[(u, v)] = float(per_edge[i, 0])
                 self.edge_solid[(u, v)] = bool(per_edge[i, 5] > 0)
@@ -603,7 +604,7 @@ class TransportPlan:
             before=np.array([c.before for c in cands]),
             row_tri=np.concatenate([c.triangle_of_point for c in cands]))
 
-    def dispatch(self, flat: _Flat, retry_per_row: int = _scoring.RETRY_PER_ROW):
+    def dispatch(self, flat: _Flat):
         """Pads ``flat`` and dispatches the scoring kernel; does not wait.
 
         The kernel runs while the caller goes on (in the decimation loop,
@@ -613,42 +614,35 @@ class TransportPlan:
         if not flat.cands:
             return None
         r, floats, ints = flat.packed(self.points, self.mass)
-        self.shapes_seen.add((r, retry_per_row))
+        self.shapes_seen.add(r)
         self.n_kernel_calls += 1
         with jax.enable_x64(True):
-            return _scoring.score_packed(floats, ints, rows=r, dtype=self.dtype, retry_per_row=retry_per_row)
+            return _scoring.score_packed(floats, ints, rows=r, dtype=self.dtype)
 
-    def _run(self, flat: _Flat, retry_per_row: int = _scoring.RETRY_PER_ROW):
+    def _run(self, flat: _Flat):
         """Dispatches ``flat`` and waits: the kernel's outputs as host arrays,
         cut to the batch's real rows, edges and jobs."""
-        total, per_edge, assignment, located, unresolved, overflow = jax.device_get(
-            self.dispatch(flat, retry_per_row))
+        out = jax.device_get(self.dispatch(flat))
+        total, per_edge, assignment, located, unresolved = out
         nj, ne, nr = len(flat.row_start) - 1, len(flat.edge_job), len(flat.row_point)
-        return total[:nj], per_edge[:ne], assignment[:nr], located[:nr], unresolved[:nj], bool(overflow)
+        return total[:nj], per_edge[:ne], assignment[:nr], located[:nr], unresolved[:nj]
 
     def collect(self, flat: _Flat, pending) -> tuple[np.ndarray, list[CandidateCost]]:
         """Results of :meth:`dispatch`: see :meth:`score`.
 
-        A batch in which more guesses failed than the kernel's retry takes
-        (ears holding over a quarter of the points: large stars late in a
-        1M-point run) is scored again with every row retried (a kernel
-        variant compiled on first need). Jobs with a point the kernel still
-        could not locate (its filter unsure: points on or within rounding of
-        an edge, frequent on exactly collinear input) are then located on the
-        host and scored again.
+        Jobs with a point the kernel could not locate (its filter unsure:
+        points on or within rounding of an edge, frequent on exactly
+        collinear input) are located on the host and scored again.
         """
         if pending is None:
             return np.zeros(0), []
         nj, ne, nr = len(flat.row_start) - 1, len(flat.edge_job), len(flat.row_point)
-        total, per_edge, assignment, located, unresolved, overflow = jax.device_get(pending)
+        total, per_edge, assignment, located, unresolved = jax.device_get(pending)
         total, per_edge, assignment, located = total[:nj], per_edge[:ne], assignment[:nr], located[:nr]
         bad = np.flatnonzero(unresolved[:nj])
-        if len(bad) and overflow:
-            total, per_edge, assignment, located, unresolved, _ = self._run(flat, retry_per_row=1)
-            bad = np.flatnonzero(unresolved)
         if len(bad):
             self._locate_on_host(flat, bad)
-            total, per_edge, assignment, located, *_ = self._run(flat)
+            total, per_edge, assignment, located, _ = self._run(flat)
         delta = total - flat.before
         # Local numbering: flat edges minus the job's offset, likewise triangles.
         assignment = assignment - flat.edge_start[flat.row_job]

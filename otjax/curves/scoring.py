@@ -180,9 +180,8 @@ def pseudo_angle(dx, dy, xp=np):
     return xp.where(dx < 0, 2 - r, xp.where(dy < 0, 4 + r, r))
 
 
-def _locate(batch: FlatBatch, px, py, need, retry_per_row: int):
-    """Flat triangle holding each row's point (``-1``: not located), and
-    whether more guesses failed than the retry could take."""
+def _locate(batch: FlatBatch, px, py, need):
+    """Flat triangle holding each row's point (``-1``: not located)."""
     job = batch.row_job
     ax, ay = batch.job_apex[job, 0], batch.job_apex[job, 1]
     phi = jnp.mod(pseudo_angle(px - ax, py - ay, jnp) - batch.job_theta[job], 4.0)
@@ -210,7 +209,7 @@ def _locate(batch: FlatBatch, px, py, need, retry_per_row: int):
     # candidate triangle at a time in a loop (a (K, 6) block compiled 0.3 s
     # slower per shape, for the same work).
     n_rows = need.shape[0]
-    k_rows = n_rows // retry_per_row
+    k_rows = n_rows // RETRY_PER_ROW
     failed = need & ~ok
     slot = jnp.where(failed, jnp.cumsum(failed) - 1, k_rows)
     retry = jnp.full(k_rows, n_rows, jnp.int32).at[slot].set(jnp.arange(n_rows, dtype=jnp.int32), mode="drop")
@@ -228,33 +227,29 @@ def _locate(batch: FlatBatch, px, py, need, retry_per_row: int):
         return jnp.where((found < 0) & hit, t, found)
 
     found = jax.lax.fori_loop(0, tris.shape[1], test, jnp.full(k_rows, -1, tris.dtype))
-    return loc.at[retry].set(found, mode="drop"), failed.sum() > k_rows
+    return loc.at[retry].set(found, mode="drop")
 
 
-@functools.partial(jax.jit, static_argnames=("dtype", "retry_per_row"))
-def score_flat(batch: FlatBatch, dtype=jnp.float64, retry_per_row: int = RETRY_PER_ROW):
+@functools.partial(jax.jit, static_argnames=("dtype",))
+def score_flat(batch: FlatBatch, dtype=jnp.float64):
     """Locates, assigns and costs a flat batch; see the module docstring.
 
     Args:
       batch: a :class:`FlatBatch` of capacity ``R``.
       dtype: float type of the cost arithmetic (location is always float64).
-      retry_per_row: at most ``R / retry_per_row`` rows whose guess failed
-        get the second test.
 
     Returns:
       ``(total (J,), per_edge (E, 6), assignment (R,), located (R,),
-      unresolved (J,), overflow ())``: each job's cost after the change; per
-      edge, the fields ``EDGE_FIELDS`` of
-      :class:`~otjax.curves.cost.StencilCost`; each row's flat edge (``-1``
-      on padding); each located row's flat triangle (``-1`` elsewhere); per
-      job, how many of its rows the kernel could not locate (its costs are
-      then meaningless); and whether some were left untested because more
-      guesses failed than the retry takes.
+      unresolved (J,))``: each job's cost after the change; per edge, the
+      fields ``EDGE_FIELDS`` of :class:`~otjax.curves.cost.StencilCost`;
+      each row's flat edge (``-1`` on padding); each located row's flat
+      triangle (``-1`` elsewhere); and per job, how many of its rows the
+      kernel could not locate (its costs are then meaningless).
     """
     p = batch.row_xy
     px, py = p[:, 0], p[:, 1]
     need = batch.row_locate & batch.row_valid
-    loc, overflow = _locate(batch, px, py, need, retry_per_row)
+    loc = _locate(batch, px, py, need)
     unresolved = need & (loc < 0)
     cand = jnp.where(need[:, None], batch.tri_edges[jnp.maximum(loc, 0)], batch.row_cand)
     m = jnp.where(batch.row_valid, batch.row_mass, 0).astype(dtype)
@@ -264,11 +259,10 @@ def score_flat(batch: FlatBatch, dtype=jnp.float64, retry_per_row: int = RETRY_P
     total = jax.ops.segment_sum(res.edge_cost, batch.edge_job, num_segments=n_jobs)
     per_edge = jnp.stack([getattr(res, k).astype(dtype) for k in EDGE_FIELDS], -1)
     bad = jax.ops.segment_sum(unresolved.astype(jnp.int32), batch.row_job, num_segments=n_jobs)
-    return total, per_edge, res.assignment, loc, bad, overflow
+    return total, per_edge, res.assignment, loc, bad
 
 
-@functools.partial(jax.jit, static_argnames=("rows", "dtype", "retry_per_row"))
-def score_packed(floats: jax.Array, ints: jax.Array, rows: int, dtype=jnp.float64,
-                 retry_per_row: int = RETRY_PER_ROW):
+@functools.partial(jax.jit, static_argnames=("rows", "dtype"))
+def score_packed(floats: jax.Array, ints: jax.Array, rows: int, dtype=jnp.float64):
     """:func:`score_flat` of the batch packed by :func:`layout` at capacity ``rows``."""
-    return score_flat.__wrapped__(unpack(floats, ints, rows), dtype, retry_per_row)
+    return score_flat.__wrapped__(unpack(floats, ints, rows), dtype)
