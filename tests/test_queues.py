@@ -118,6 +118,31 @@ def test_fused_kernel_equals_host_location_and_the_plain_kernel(seed):
     assert_costs_match(located, costs2, ref)
 
 
+def test_retry_rounds_locate_what_one_round_cannot_take():
+    """A retry round that takes one row at a time gives the same locations."""
+    import jax
+
+    from otjax.curves import scoring
+
+    plan = make_plan(np.random.default_rng(6))
+    sources = np.nonzero(plan.tri.alive & ~plan.tri.pinned)[0].tolist()
+    flat = next(plan.exports(sources))
+    r, floats, ints = flat.packed(plan.points, plan.mass)
+    batch = scoring.unpack(floats, ints, r)
+    with jax.enable_x64(True):
+        want = jax.device_get(scoring.score_flat(batch))
+        got = jax.device_get(scoring.score_flat(batch, retry_per_row=r))  # rounds of one row
+    n = len(flat.row_point)
+    loc, job = want[3][:n], flat.row_job
+    assert np.all(loc[flat.row_locate] >= 0)  # every region point located, in the kernel
+    # Points in ears failed their sector guess: with one row per round, they
+    # took one round each.
+    in_ear = flat.row_locate & (loc < flat.fan_tri[np.minimum(flat.job_fan[job], len(flat.fan_tri) - 1)])
+    assert in_ear.sum() >= 2
+    for w, g in zip(want, got):
+        np.testing.assert_array_equal(g, w)
+
+
 def test_fused_kernel_on_collinear_data_falls_back_exactly():
     """Points exactly on edges: the kernel's filter is unsure, the host decides."""
     pts = make_points("grid", 64, 0)

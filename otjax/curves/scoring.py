@@ -180,7 +180,7 @@ def pseudo_angle(dx, dy, xp=np):
     return xp.where(dx < 0, 2 - r, xp.where(dy < 0, 4 + r, r))
 
 
-def _locate(batch: FlatBatch, px, py, need):
+def _locate(batch: FlatBatch, px, py, need, retry_per_row: int = RETRY_PER_ROW):
     """Flat triangle holding each row's point (``-1``: not located)."""
     job = batch.row_job
     ax, ay = batch.job_apex[job, 0], batch.job_apex[job, 1]
@@ -203,40 +203,51 @@ def _locate(batch: FlatBatch, px, py, need):
     ok = need & (hi >= lo) & (in_triangle_rows(batch.tri_xy[:, guess], px, py) == INSIDE)
     loc = jnp.where(ok, guess, -1)
 
-    # Second test, on the compacted rows whose guess failed: the sectors on
-    # either side (rounding of the pseudo-angles) and the ears. Compacted by
-    # a cumulative sum (jnp.nonzero compiled 0.2 s slower), tested one
-    # candidate triangle at a time in a loop (a (K, 6) block compiled 0.3 s
-    # slower per shape, for the same work).
+    # Second test, on the rows whose guess failed: the sectors on either side
+    # (rounding of the pseudo-angles) and the ears. In rounds of at most
+    # R / RETRY_PER_ROW compacted rows until every failed row had its test:
+    # one round almost always; more when ears hold over a quarter of the
+    # points (large stars late in a 1M-point run: a single retry had 10.5M
+    # rows fall back on the host there). Compacted by a cumulative sum
+    # (jnp.nonzero compiled 0.2 s slower), one candidate triangle per loop
+    # step (a (K, 6) block compiled 0.3 s slower per shape, same work).
     n_rows = need.shape[0]
-    k_rows = n_rows // RETRY_PER_ROW
-    failed = need & ~ok
-    slot = jnp.where(failed, jnp.cumsum(failed) - 1, k_rows)
-    retry = jnp.full(k_rows, n_rows, jnp.int32).at[slot].set(jnp.arange(n_rows, dtype=jnp.int32), mode="drop")
-    r = jnp.minimum(retry, n_rows - 1)
-    rj, rg, qx, qy = job[r], g[r], px[r], py[r]
-    rlo, rhi = batch.job_fan[rj], batch.job_fan[rj + 1] - 1
-    width = jnp.maximum(rhi - rlo + 1, 1)
-    sides = [batch.fan_tri[rlo + jnp.mod(rg - rlo + k, width)] for k in (-1, 1)]
-    tris = jnp.stack(sides + [batch.job_ears[rj, k] for k in range(MAX_EARS)], 1)  # (K, 2 + MAX_EARS)
-    tris = jnp.where((rhi >= rlo)[:, None], tris, -1)
+    k_rows = max(n_rows // retry_per_row, 1)
 
-    def test(k, found):
-        t = jax.lax.dynamic_index_in_dim(tris, k, 1, keepdims=False)
-        hit = (t >= 0) & (in_triangle_rows(batch.tri_xy[:, jnp.maximum(t, 0)], qx, qy) == INSIDE)
-        return jnp.where((found < 0) & hit, t, found)
+    def one_round(state):
+        loc, waiting = state
+        slot = jnp.where(waiting, jnp.cumsum(waiting) - 1, k_rows)
+        retry = jnp.full(k_rows, n_rows, jnp.int32).at[slot].set(jnp.arange(n_rows, dtype=jnp.int32),
+                                                                 mode="drop")
+        r = jnp.minimum(retry, n_rows - 1)
+        rj, rg, qx, qy = job[r], g[r], px[r], py[r]
+        rlo, rhi = batch.job_fan[rj], batch.job_fan[rj + 1] - 1
+        width = jnp.maximum(rhi - rlo + 1, 1)
+        sides = [batch.fan_tri[rlo + jnp.mod(rg - rlo + k, width)] for k in (-1, 1)]
+        tris = jnp.stack(sides + [batch.job_ears[rj, k] for k in range(MAX_EARS)], 1)  # (K, 2 + MAX_EARS)
+        tris = jnp.where((rhi >= rlo)[:, None], tris, -1)
 
-    found = jax.lax.fori_loop(0, tris.shape[1], test, jnp.full(k_rows, -1, tris.dtype))
-    return loc.at[retry].set(found, mode="drop")
+        def test(k, found):
+            t = jax.lax.dynamic_index_in_dim(tris, k, 1, keepdims=False)
+            hit = (t >= 0) & (in_triangle_rows(batch.tri_xy[:, jnp.maximum(t, 0)], qx, qy) == INSIDE)
+            return jnp.where((found < 0) & hit, t, found)
+
+        found = jax.lax.fori_loop(0, tris.shape[1], test, jnp.full(k_rows, -1, tris.dtype))
+        return loc.at[retry].set(found, mode="drop"), waiting & (slot >= k_rows)
+
+    loc, _ = jax.lax.while_loop(lambda state: state[1].any(), one_round, (loc, need & ~ok))
+    return loc
 
 
-@functools.partial(jax.jit, static_argnames=("dtype",))
-def score_flat(batch: FlatBatch, dtype=jnp.float64):
+@functools.partial(jax.jit, static_argnames=("dtype", "retry_per_row"))
+def score_flat(batch: FlatBatch, dtype=jnp.float64, retry_per_row: int = RETRY_PER_ROW):
     """Locates, assigns and costs a flat batch; see the module docstring.
 
     Args:
       batch: a :class:`FlatBatch` of capacity ``R``.
       dtype: float type of the cost arithmetic (location is always float64).
+      retry_per_row: a retry round takes at most ``R / retry_per_row`` of
+        the rows whose guess failed (tests set it high to force rounds).
 
     Returns:
       ``(total (J,), per_edge (E, 6), assignment (R,), located (R,),
@@ -249,7 +260,7 @@ def score_flat(batch: FlatBatch, dtype=jnp.float64):
     p = batch.row_xy
     px, py = p[:, 0], p[:, 1]
     need = batch.row_locate & batch.row_valid
-    loc = _locate(batch, px, py, need)
+    loc = _locate(batch, px, py, need, retry_per_row)
     unresolved = need & (loc < 0)
     cand = jnp.where(need[:, None], batch.tri_edges[jnp.maximum(loc, 0)], batch.row_cand)
     m = jnp.where(batch.row_valid, batch.row_mass, 0).astype(dtype)
