@@ -1,8 +1,8 @@
 """A persistent cache of compiled kernels, so that only the first run compiles.
 
 A reconstruction compiles its scoring kernel once per batch shape (about
-0.9 s each on a 2-core CPU, five or six shapes for a 50k-point input): a
-quarter of a 50k-point run's wall time. JAX can keep compiled executables on
+0.9 s each on a 2-core CPU, four shapes for a 50k-point input): a sixth
+of a 50k-point run's wall time. JAX can keep compiled executables on
 disk and reuse them in later processes; this module turns that on. JAX's
 setting is process-wide, so the library never turns it on by itself: the
 command line does (``--no-compile-cache`` to opt out), and library users call
