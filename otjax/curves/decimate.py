@@ -142,12 +142,17 @@ class _Scores:
             return key
         return None
 
-    def _settle(self, flat, pending, keep_hot: bool) -> list:
+    def _collect(self, flat, pending) -> list:
+        """The batch's :class:`CandidateCost` list (waits for its kernel)."""
         t1 = time.perf_counter()
         _delta, costs = self.plan.collect(flat, pending)
         self.stats.seconds["score"] += time.perf_counter() - t1
         self.stats.scored += len(costs)
-        for c, r in zip(flat.cands, costs):
+        return costs
+
+    def _settle(self, flat, pending, keep_hot: bool) -> None:
+        """Enters a dispatched batch's scores in the queue."""
+        for c, r in zip(flat.cands, self._collect(flat, pending)):
             if self.admissible is not None and not self.admissible(c, r):
                 continue
             key = (c.plan.source, c.plan.target)
@@ -157,7 +162,6 @@ class _Scores:
                 self.hot[key] = (c, r, ver)
             if self.use_heap:
                 self.push(key)
-        return costs
 
     def _dispatch(self, exports):
         """Next batch of ``exports`` (a generator: exports as it goes), dispatched."""
@@ -207,11 +211,7 @@ class _Scores:
             self.entries.pop(key, None)
         if again:
             flat, pending = self._dispatch(iter([self.plan.export(sorted(again), again)]))
-            t1 = time.perf_counter()
-            _delta, costs = self.plan.collect(flat, pending)
-            self.stats.seconds["score"] += time.perf_counter() - t1
-            self.stats.scored += len(costs)
-            for c, r in zip(flat.cands, costs):
+            for c, r in zip(flat.cands, self._collect(flat, pending)):
                 out[(c.plan.source, c.plan.target)] = (c, r)
         return [out[key] for key in keys]
 

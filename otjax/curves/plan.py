@@ -621,13 +621,17 @@ class TransportPlan:
         with jax.enable_x64(True):
             return _scoring.score_packed(floats, ints, rows=r, dtype=self.dtype)
 
-    def _run(self, flat: _Flat):
-        """Dispatches ``flat`` and waits: the kernel's outputs as host arrays,
-        cut to the batch's real rows, edges and jobs."""
-        out = jax.device_get(self.dispatch(flat))
-        total, per_edge, assignment, located, unresolved = out
+    @staticmethod
+    def _host(flat: _Flat, pending):
+        """The kernel's outputs as host arrays, cut to the batch's real jobs,
+        edges and rows (waits for the kernel)."""
+        total, per_edge, assignment, located, unresolved = jax.device_get(pending)
         nj, ne, nr = len(flat.row_start) - 1, len(flat.edge_job), len(flat.row_point)
         return total[:nj], per_edge[:ne], assignment[:nr], located[:nr], unresolved[:nj]
+
+    def _run(self, flat: _Flat):
+        """Dispatches ``flat`` and waits: :meth:`_host` of its outputs."""
+        return self._host(flat, self.dispatch(flat))
 
     def collect(self, flat: _Flat, pending) -> tuple[np.ndarray, list[CandidateCost]]:
         """Results of :meth:`dispatch`: see :meth:`score`.
@@ -638,10 +642,8 @@ class TransportPlan:
         """
         if pending is None:
             return np.zeros(0), []
-        nj, ne, nr = len(flat.row_start) - 1, len(flat.edge_job), len(flat.row_point)
-        total, per_edge, assignment, located, unresolved = jax.device_get(pending)
-        total, per_edge, assignment, located = total[:nj], per_edge[:ne], assignment[:nr], located[:nr]
-        bad = np.flatnonzero(unresolved[:nj])
+        total, per_edge, assignment, located, unresolved = self._host(flat, pending)
+        bad = np.flatnonzero(unresolved)
         if len(bad):
             self._locate_on_host(flat, bad)
             total, per_edge, assignment, located, _ = self._run(flat)
