@@ -309,13 +309,108 @@ def test_queues_keep_the_embedding_and_an_exact_plan(queue):
     assert all(plan.tri.tri[f] is not None for f in np.unique(faces))
 
 
+# ------------------------------------------------------------- link updates
+def run_queue(plan, queue, incremental, target=8, relocation=15):
+    """``decimate``, recording each collapse and relocation in order."""
+    applied = []
+    apply = plan.apply
+
+    def recording(cand, scored):
+        applied.append((cand.plan.source, cand.plan.target, None if cand.moved is None else tuple(cand.moved)))
+        return apply(cand, scored)
+
+    plan.apply = recording
+    stats_ = decimate(plan, target, queue=queue, relocation=relocation, seed=2, incremental=incremental)
+    return applied, stats_
+
+
+@settings(max_examples=12, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(queue=st.sampled_from(["exhaustive", "parallel"]), n=st.integers(60, 220), seed=st.integers(0, 10_000),
+       subset=st.sampled_from([0.5, 1.0]))
+def test_link_updates_make_the_same_greedy_as_full_rescoring(queue, n, seed, subset):
+    def plan():
+        rng = np.random.default_rng(seed)
+        pts = noisy_shape(rng, n)
+        mass = rng.uniform(0.2, 2.0, n)
+        keep = rng.random(n) < subset
+        return TransportPlan(Triangulation(np.unique(pts[keep], axis=0) if subset < 1 else pts), pts, mass)
+
+    full, full_stats = run_queue(plan(), queue, incremental=False)
+    updated, stats_ = run_queue(plan(), queue, incremental=True)
+    # The same changes in the same order: every score, exact ties included,
+    # is the same as a full re-scoring's.
+    assert updated == full
+    assert full_stats.updated == 0 < stats_.updated
+    assert stats_.scored < full_stats.scored
+
+
+@pytest.mark.parametrize("seed", [12, 13])
+def test_each_link_update_equals_a_full_scoring(seed, monkeypatch):
+    rng = np.random.default_rng(seed)
+    pts = noisy_shape(rng, 500)
+    mass = rng.uniform(0.5, 2.0, len(pts))
+    plan = TransportPlan(Triangulation(pts[::2]), pts, mass)
+    checked = []
+    link_updates = TransportPlan.link_updates
+
+    def checking(self, items, budget=None):
+        out = link_updates(self, items) if budget is None else link_updates(self, items, budget)
+        for (rec, changed), (new, delta) in zip(items, out):
+            v, w = rec.plan.source, rec.plan.target
+            # The star kept its triangles; what changed lies on its link.
+            ring = self.tri.star(v)[0]
+            link = {tuple(sorted((ring[k], ring[(k + 1) % len(ring)]))) for k in range(len(ring))}
+            assert changed and changed <= link
+            cands = self.candidates([v], {v: [w]})  # located on the host: another path
+            _, (cost,) = self.score(cands)
+            np.testing.assert_array_equal(new.keys, cands[0].keys)
+            np.testing.assert_allclose(new.edge_cost, cost.edge_cost, rtol=1e-12, atol=1e-15)
+            assert delta == pytest.approx(cost.delta, rel=1e-12, abs=1e-14)
+            checked.append(delta)
+        return out
+
+    monkeypatch.setattr(TransportPlan, "link_updates", checking)
+    stats_ = decimate(plan, 10, queue="exhaustive", relocation=20)
+    assert stats_.updated == len(checked) > 100
+    plan.tri.check()
+    assert plan.total_cost() == pytest.approx(scratch_cost(plan.tri, pts, mass), rel=1e-9)
+
+
+def test_changed_links_reports_star_changes_as_none():
+    rng = np.random.default_rng(14)
+    plan = make_plan(rng, n=200)
+    tri = plan.tri
+    version = list(plan._region_version)
+    stars = {v: tri.star(v) for v in range(len(tri.xy)) if tri.alive[v] and not tri.pinned[v]}
+    s, t = next((s, t) for s, t in tri.half_edges() if plan.candidate(s, t) is not None)
+    cand = plan.candidate(s, t)
+    _, (cost,) = plan.score([cand])
+    dirty = plan.apply(cand, cost)
+    for v in dirty:
+        changed = plan.changed_links(v, version[v])
+        if v in cand.plan.ring:
+            assert changed is None
+        else:
+            assert tri.star(v) == stars[v]  # same ring, same faces
+            ring = stars[v][0]
+            link = {tuple(sorted((ring[k], ring[(k + 1) % len(ring)]))) for k in range(len(ring))}
+            assert changed and changed <= link
+            assert plan.changed_links(v, plan._region_version[v]) == set()
+    for v in set(stars) - dirty - {s}:
+        assert tri.star(v) == stars[v]
+
+
 def test_multiple_choice_scores_far_fewer_candidates():
     pts, _ = otjax.datasets.star(1500, noise=0.01, seed=9)
     mc = otjax.reconstruct_curve(pts, n_vertices=10, queue="multiple-choice", relocation=0)
     ex = otjax.reconstruct_curve(pts, n_vertices=10, queue="exhaustive", relocation=0)
     assert mc.history["switched_at"] == 50
-    # A step scores at most `choices` half-edges until the switch.
-    assert mc.history["scored"] < ex.history["scored"] / 3
+    # A step scores at most `choices` half-edges until the switch. Updates
+    # on changed link edges (exhaustive loop) count as evaluations too.
+    def evaluated(r):
+        return r.history["scored"] + r.history["updated"]
+
+    assert evaluated(mc) < evaluated(ex) / 3
 
 
 def test_same_seed_same_multiple_choice_result_and_seed_matters():

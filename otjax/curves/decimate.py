@@ -49,6 +49,8 @@ class DecimationStats:
       collapses: number of half-edge collapses applied.
       relocations: number of vertex moves applied.
       scored: number of candidate stencils scored.
+      updated: number of scored collapses brought up to date on their
+        changed link edges only (see :class:`~otjax.curves.plan.LinkRecord`).
       kernel_calls: number of batched kernel calls.
       rounds: number of rounds (one per collapse, except in parallel mode).
       switched_at: live vertex count at which the multiple-choice queue
@@ -61,6 +63,7 @@ class DecimationStats:
     collapses: int = 0
     relocations: int = 0
     scored: int = 0
+    updated: int = 0
     kernel_calls: int = 0
     rounds: int = 0
     switched_at: int | None = None
@@ -115,6 +118,13 @@ class _Scores:
         self.hot: dict[tuple[int, int], tuple] = {}  # key -> (candidate, cost, version)
         self.heap: list = []
         self.use_heap = False
+        # Once every change is followed by a re-scoring of all it made dirty
+        # (the exhaustive and parallel loops), collapses whose link only
+        # changed are updated on the changed link edges instead of being
+        # scored again (LinkRecord): {source: {target: record}}. Not with a
+        # veto, which reads every edge's parts.
+        self.records: dict[int, dict] | None = None
+        self.entered: list = []  # keys scored by the current rescore, to push
         # Exact ties (zero-cost collapses along clean straight runs) pop in
         # insertion order, i.e. by vertex id, i.e. along the run: neighbours
         # first. The parallel queue wants them spread out, so it breaks ties
@@ -156,12 +166,39 @@ class _Scores:
             if self.admissible is not None and not self.admissible(c, r):
                 continue
             key = (c.plan.source, c.plan.target)
-            ver = self.version[key[0]]
-            self.entries[key] = (r.delta, ver)
+            delta = r.delta
+            if self.records is not None:
+                rec = self.plan.link_record(c, r)
+                self.records.setdefault(key[0], {})[key[1]] = rec
+                delta = rec.delta(c.before)
+            self._enter(key, delta)
             if keep_hot:
-                self.hot[key] = (c, r, ver)
-            if self.use_heap:
-                self.push(key)
+                self.hot[key] = (c, r, self.version[key[0]])
+
+    def _enter(self, key, delta: float) -> None:
+        self.entries[key] = (delta, self.version[key[0]])
+        self.entered.append(key)
+
+    def _split(self, sources):
+        """Sources' half-edges to score in full (``{source: targets}``), and
+        ``(record, changed links)`` of those only their link changed."""
+        plan = self.plan
+        tri = plan.tri
+        full: dict[int, list[int]] = {}
+        updates = []
+        for v in sources:
+            recs = self.records.pop(v, {})
+            if not tri.alive[v] or tri.pinned[v]:
+                continue
+            for w in tri.star(v)[0]:
+                rec = recs.get(w)
+                changed = None if rec is None else plan.changed_links(v, rec.version)
+                # Same plan: the same new triangles over the same star.
+                if changed is not None and plan._plan(v, w) == rec.plan:
+                    updates.append((rec, changed))
+                else:
+                    full.setdefault(v, []).append(w)
+        return full, updates
 
     def _dispatch(self, exports):
         """Next batch of ``exports`` (a generator: exports as it goes), dispatched."""
@@ -179,7 +216,13 @@ class _Scores:
         """Exports and scores the half-edges leaving ``sources`` (see
         :meth:`TransportPlan.exports`), batch by batch."""
         self.hot = {}
-        exports = self.plan.exports(sorted(sources), targets)
+        self.entered = []
+        sources = sorted(sources)
+        full, updates = sources, []
+        if self.records is not None and targets is None:
+            targets, updates = self._split(sources)
+            full = sorted(targets)
+        exports = self.plan.exports(full, targets)
         # Batches are exported while earlier ones are scored, and a few are
         # kept in flight: XLA:CPU then runs two at once on two cores (a 64k-row
         # batch: 10.6 ms each instead of 13.7 ms, measured).
@@ -193,6 +236,28 @@ class _Scores:
                 self._settle(*in_flight.pop(0), keep_hot)
         for flat, pending in in_flight:
             self._settle(flat, pending, keep_hot)
+        if updates:
+            t0 = time.perf_counter()
+            for rec, delta in self.plan.link_updates(updates):
+                key = (rec.plan.source, rec.plan.target)
+                self.records.setdefault(key[0], {})[key[1]] = rec
+                self._enter(key, delta)
+            self.stats.seconds["score"] += time.perf_counter() - t0
+            self.stats.updated += len(updates)
+        self._push_entered(sources)
+
+    def _push_entered(self, sources) -> None:
+        """Pushes the keys just scored, by source then ring order: the order
+        in which a full re-scoring enters them, which decides exact ties."""
+        entered, self.entered = self.entered, []
+        if not self.use_heap:
+            return
+        if len(sources) > 1:
+            rank = {v: i for i, v in enumerate(sources)}
+            tri = self.plan.tri
+            entered.sort(key=lambda k: (rank[k[0]], tri.star(k[0])[0].index(k[1])))
+        for key in entered:
+            self.push(key)
 
     def take(self, keys) -> list[tuple]:
         """``(candidate, cost)`` of fresh entries, exporting again what is not hot.
@@ -209,6 +274,8 @@ class _Scores:
             else:
                 again.setdefault(key[0], []).append(key[1])
             self.entries.pop(key, None)
+            if self.records is not None:
+                self.records.pop(key[0], None)
         if again:
             flat, pending = self._dispatch(iter([self.plan.export(sorted(again), again)]))
             for c, r in zip(flat.cands, self._collect(flat, pending)):
@@ -319,7 +386,8 @@ class IndependentSet:
 
 def decimate(plan: TransportPlan, n_vertices: int | None = None, *, tolerance: float | None = None,
              relocation: int = 0, queue: str = "exhaustive", choices: int = 15, switch_factor: float = 5.0,
-             round_fraction: float = 0.05, seed: int = 0, progress: bool = False) -> DecimationStats:
+             round_fraction: float = 0.05, seed: int = 0, progress: bool = False,
+             incremental: bool = True) -> DecimationStats:
     """Collapses greedily until ``n_vertices`` remain or no collapse is admissible.
 
     Args:
@@ -342,6 +410,11 @@ def decimate(plan: TransportPlan, n_vertices: int | None = None, *, tolerance: f
         of the collapses still to do (at least one).
       seed: seed of the multiple-choice draws.
       progress: show a tqdm progress bar.
+      incremental: in the exhaustive and parallel loops, bring the scores of
+        collapses whose star kept its triangles up to date on the changed
+        link edges only (:class:`~otjax.curves.plan.LinkRecord`), rather
+        than scoring them again; same scores, a third fewer scored points
+        late in a run. ``False`` scores every dirty half-edge in full.
 
     Returns:
       :class:`DecimationStats`.
@@ -426,6 +499,8 @@ def decimate(plan: TransportPlan, n_vertices: int | None = None, *, tolerance: f
     if len(live) > target:
         # The multiple-choice phase scored only what it drew: score it all.
         scores.use_heap = True
+        if admissible is None and incremental:
+            scores.records = {}
         scores.rescore(live.ids, keep_hot=False)
     while len(live) > target and queue != "parallel":
         key = scores.pop()

@@ -39,6 +39,9 @@ _NO_IDS = np.zeros(0, np.int64)
 # rather than 2^16: one compiled shape fewer below 200k points (50k: 19.6 ->
 # 18.3 s, 200k: 44.0 -> 41.2 s; 1M unchanged, its stars need 2^16 alone).
 ROW_BUDGET = 1 << 15
+# Link changes remembered per vertex (see TransportPlan.changed_links); an
+# older record is treated as a change of the star.
+_LINK_LOG = 64
 
 
 class CandidateStencil(NamedTuple):
@@ -100,6 +103,45 @@ class CandidateCost(NamedTuple):
     triangle: np.ndarray
 
 
+class LinkRecord(NamedTuple):
+    """What re-scoring a scored collapse needs when only its link changed.
+
+    A change next to the star of ``source`` (not in it) alters the points
+    across some of its link edges and nothing else of its collapse stencils:
+    their after-costs differ on those link edges only. Each link edge after
+    the collapse holds the points of the changed region assigned to it
+    (unchanged while the plan is) and the points across it that keep it.
+
+    Attributes:
+      plan: the collapse plan scored.
+      version: the source's region version when scored (see
+        :meth:`TransportPlan.changed_links`).
+      keys: ``(E, 2)`` the candidate's local edge keys.
+      edge_cost: ``(E,)`` cost of each local edge after the collapse.
+      link_edge: ``(n,)`` local index of link edge ``k`` (``(ring[k], ring[k+1])``).
+      link_start: ``(n + 1,)`` offsets of each link edge's points in ``link_points``.
+      link_points: points of the changed region assigned to each link edge,
+        in stencil order.
+    """
+
+    plan: CollapsePlan
+    version: int
+    keys: np.ndarray
+    edge_cost: np.ndarray
+    link_edge: np.ndarray
+    link_start: np.ndarray
+    link_points: np.ndarray
+
+    def delta(self, before: float) -> float:
+        """Cost increase of the collapse against the region's ``before``.
+
+        The edge costs are added in local edge order, as the kernel's
+        segment sum does: the greedy makes the same choices (exact ties
+        and rounding included) with or without updates (tested).
+        """
+        return float(np.cumsum(self.edge_cost)[-1]) - before
+
+
 def segment_sqdist_np(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Squared point-segment distance with the kernel's exact tie rule.
 
@@ -149,6 +191,11 @@ class TransportPlan:
         # it touches: see apply).
         self._region_version = [0] * len(tri.xy)
         self._regions: dict[int, tuple] = {}
+        # What each change did to the vertices it made dirty (see
+        # changed_links): the region version of the last change of the star
+        # itself, and since then the link edges whose far side changed.
+        self._star_changed_at: dict[int, int] = {}
+        self._link_log: dict[int, list[tuple[int, frozenset]]] = {}
         self._plans: dict[tuple[int, int], tuple] = {}
         self.pt_face = self._initial_location()
         self.face_pts: list[np.ndarray] = [np.zeros(0, np.int64)] * len(tri.tri)
@@ -212,28 +259,12 @@ class TransportPlan:
         """Computes the cost of every edge that holds points, in batches."""
         keys = self.pt_edge[:, 0] * len(self.tri.xy) + self.pt_edge[:, 1]
         order = np.argsort(keys, kind="stable")
-        _uniq, starts, counts = np.unique(keys[order], return_index=True, return_counts=True)
-        xy = self.tri.xy
+        _uniq, starts = np.unique(keys[order], return_index=True)
         ends = self.pt_edge[order[starts]]  # (n_edges, 2)
-        # Whole edges per batch, about ROW_BUDGET points each; the row
-        # capacity also bounds the edges per batch.
-        first = 0
-        while first < len(starts):
-            rows = np.cumsum(counts[first:])
-            # Within the capacity the decimation loop uses anyway: no shape of its own.
-            last = first + max(1, int(np.searchsorted(rows, ROW_BUDGET, side="right")))
-            last = min(last, first + ROW_BUDGET // _scoring.EDGES_PER_ROW - 1)
-            ids = order[starts[first]: starts[last - 1] + counts[last - 1]]
-            edge_of_row = np.repeat(np.arange(last - first), counts[first:last])
-            flat = _Flat.without_triangles(
-                ids, np.repeat(edge_of_row[:, None], 3, 1), np.zeros(len(ids), np.int64),
-                xy[ends[first:last]], np.zeros(last - first, np.int64), [None])
-            total, per_edge, *_ = self._run(flat)
-            del total
-            for i, (u, v) in enumerate(ends[first:last].tolist()):
-                self.edge_cost[(u, v)] = float(per_edge[i, 0])
-                self.edge_solid[(u, v)] = bool(per_edge[i, 5] > 0)
-            first = last
+        per_edge = self._edge_costs([(p,) for p in np.split(order, starts[1:])], ends)
+        for (u, v), c, solid in zip(ends.tolist(), per_edge[:, 0].tolist(), (per_edge[:, 5] > 0).tolist()):
+            self.edge_cost[(u, v)] = c
+            self.edge_solid[(u, v)] = solid
 
     @property
     def compiled_shapes(self) -> int:
@@ -308,6 +339,108 @@ class TransportPlan:
         region = ring, star, inside, ids[keep], link[keep], before
         self._regions[v] = (self._region_version[v], region)
         return region
+
+    def changed_links(self, v: int, since: int) -> set | None:
+        """Link edges of ``v``'s star whose far side changed after region
+        version ``since``; ``None`` if the star itself may have changed."""
+        if self._star_changed_at.get(v, -1) > since:
+            return None
+        out: set = set()
+        for version, keys in self._link_log.get(v, ()):
+            if version > since:
+                out |= keys
+        return out
+
+    def link_record(self, cand: CandidateStencil, scored: CandidateCost) -> LinkRecord:
+        """The :class:`LinkRecord` of a scored collapse, valid at the current state."""
+        ring = np.asarray(cand.plan.ring, np.int64)
+        nxt = np.roll(ring, -1)
+        nv = len(self.tri.xy)
+        code = cand.keys[:, 0] * nv + cand.keys[:, 1]  # keys are sorted
+        link_edge = np.searchsorted(code, np.minimum(ring, nxt) * nv + np.maximum(ring, nxt))
+        which = np.full(len(code), -1, np.int64)
+        which[link_edge] = np.arange(len(ring))
+        k = which[scored.assignment[: cand.n_inside]]
+        on_link = np.flatnonzero(k >= 0)
+        order = on_link[np.argsort(k[on_link], kind="stable")]
+        start = np.searchsorted(k[order], np.arange(len(ring) + 1))
+        return LinkRecord(cand.plan, self._region_version[cand.plan.source], cand.keys,
+                          np.asarray(scored.edge_cost, np.float64), link_edge, start,
+                          cand.point_ids[order])
+
+    def link_updates(self, items, budget: int = ROW_BUDGET):
+        """Re-scores collapses whose link changed: the changed link edges only.
+
+        Args:
+          items: ``(record, changed)`` pairs: a :class:`LinkRecord` whose
+            plan is still the source's plan for its target, and the keys of
+            its changed link edges (from :meth:`changed_links`).
+
+        Returns:
+          ``[(record, delta)]``: each record brought up to date, and the
+          collapse's cost increase; the same values (up to the order of
+          exact ties within an edge) as a full re-scoring, since each
+          edge's points come in the same order.
+        """
+        parts, edges, where = [], [], []
+        for i, (rec, changed) in enumerate(items):
+            region = self._region(rec.plan.source)
+            ring = region[0]
+            n = len(ring)
+            for k in range(n):
+                if edge_key(ring[k], ring[(k + 1) % n]) not in changed:
+                    continue
+                parts.append((rec.link_points[rec.link_start[k]: rec.link_start[k + 1]],
+                              region[3][region[4] == k]))
+                edges.append(rec.keys[rec.link_edge[k]])
+                where.append((i, rec.link_edge[k]))
+        costs = self._edge_costs(parts, np.asarray(edges, np.int64).reshape(-1, 2), budget)[:, 0]
+        new_cost = [rec.edge_cost.copy() for rec, _ in items]
+        for (i, e), c in zip(where, costs.tolist()):
+            new_cost[i][e] = c
+        out = []
+        for (rec, _), cost in zip(items, new_cost):
+            v = rec.plan.source
+            rec = rec._replace(version=self._region_version[v], edge_cost=cost)
+            out.append((rec, rec.delta(self._region(v)[5])))
+        return out
+
+    def _edge_costs(self, parts, keys: np.ndarray, budget: int = ROW_BUDGET) -> np.ndarray:
+        """Costs of the edges ``keys (n, 2)``, edge ``i`` holding the points
+        of ``parts[i]`` (id arrays, concatenated in order).
+
+        Whole edges per batch, about ``budget`` rows each (within the
+        capacities the decimation loop uses anyway: no shape of their own),
+        each batch dispatched before the last is read.
+
+        Returns:
+          ``(n, 6)`` the kernel's per-edge fields (``scoring.EDGE_FIELDS``).
+        """
+        counts = np.fromiter((sum(map(len, p)) for p in parts), np.int64, len(parts))
+        xy = self.tri.xy
+
+        def batches():
+            first = 0
+            while first < len(parts):
+                rows = np.cumsum(counts[first:])
+                last = first + max(1, int(np.searchsorted(rows, budget, side="right")))
+                last = min(last, first + budget // _scoring.EDGES_PER_ROW - 1)
+                ids = np.concatenate([a for p in parts[first:last] for a in p]).astype(np.int64)
+                edge_of_row = np.repeat(np.arange(last - first), counts[first:last])
+                yield _Flat.without_triangles(
+                    ids, np.repeat(edge_of_row[:, None], 3, 1), np.zeros(len(ids), np.int64),
+                    xy[keys[first:last]], np.zeros(last - first, np.int64), [None])
+                first = last
+
+        out, pending = [np.zeros((0, 6))], None
+        for flat in batches():
+            handle = self.dispatch(flat)
+            if pending is not None:
+                out.append(self._host(*pending)[1])
+            pending = flat, handle
+        if pending is not None:
+            out.append(self._host(*pending)[1])
+        return np.concatenate(out)
 
     def exports(self, sources, targets: dict | None = None, budget: int = ROW_BUDGET):
         """Yields :meth:`export` batches of the half-edges leaving ``sources``.
@@ -755,14 +888,36 @@ class TransportPlan:
         # The vertices of the new triangles and of the triangles next to them:
         # every vertex whose star, faces across its link, their points or the
         # costs of its star's edges have changed.
-        dirty = set(plan.ring)
-        dirty.add(plan.target)
-        for f in new_ids:
+        # The far vertex of a face across the region's boundary keeps its
+        # star: only the points across that link edge changed (logged for
+        # changed_links).
+        full = set(plan.ring)
+        full.add(plan.source)
+        links: dict[int, set] = {}
+        new_set = set(new_ids.tolist())
+        for f in new_set:
+            tf = tri.tri[f]
             for g in tri.nbr[f]:
-                if g >= 0:
-                    dirty.update(tri.tri[g])
+                if g >= 0 and g not in new_set:
+                    tg = tri.tri[g]
+                    a = next(u for u in tg if u not in tf)
+                    if a not in full:
+                        x, y = (u for u in tg if u != a)
+                        links.setdefault(a, set()).add(edge_key(x, y))
+        dirty = full | set(links)
+        dirty.discard(plan.source)
+        if cand.moved is not None:
+            dirty.add(plan.source)
         for v in dirty:
             self._region_version[v] += 1
+            if v in links:
+                log = self._link_log.setdefault(v, [])
+                log.append((self._region_version[v], frozenset(links[v])))
+                if len(log) > _LINK_LOG:
+                    self._star_changed_at[v] = log.pop(0)[0]
+            else:
+                self._star_changed_at[v] = self._region_version[v]
+                self._link_log.pop(v, None)
         self._regions.pop(plan.source, None)
         return {v for v in dirty if tri.alive[v] and not tri.pinned[v]}
 

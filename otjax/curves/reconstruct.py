@@ -163,7 +163,7 @@ def reconstruct_curve(points, masses=None, n_vertices: int | None = None, *,
         timings["refine"] = time.perf_counter() - t0
     result = result_from_plan(plan, relevance, params, time.perf_counter() - t_start, density)
     result.history = {"collapses": stats.collapses, "relocations": moved, "scored": stats.scored,
-                      "kernel_calls": plan.n_kernel_calls, "seconds": timings,
+                      "updated": stats.updated, "kernel_calls": plan.n_kernel_calls, "seconds": timings,
                       "rounds": stats.rounds, "switched_at": stats.switched_at,
                       "compiled_shapes": plan.compiled_shapes,
                       "refine": refined}
