@@ -127,12 +127,18 @@ def test_retry_rounds_locate_what_one_round_cannot_take():
     plan = make_plan(np.random.default_rng(6))
     sources = np.nonzero(plan.tri.alive & ~plan.tri.pinned)[0].tolist()
     flat = next(plan.exports(sources))
-    r, floats, ints = flat.packed(plan.points, plan.mass)
-    batch = scoring.unpack(floats, ints, r)
+    r = flat.capacity()
+    batch = scoring.unpack(*flat.packed(plan.points, plan.mass, r), r)
+    wide = scoring.unpack(*flat.packed(plan.points, plan.mass, 2 * r), 2 * r)
     with jax.enable_x64(True):
         want = jax.device_get(scoring.score_flat(batch))
         got = jax.device_get(scoring.score_flat(batch, retry_per_row=r))  # rounds of one row
+        padded = jax.device_get(scoring.score_flat(wide))
     n = len(flat.row_point)
+    # A batch scored in a larger compiled shape (what dispatch may reuse):
+    # the same outputs on its jobs, edges and rows.
+    for w, p_, size in zip(want, padded, (len(flat.row_start) - 1, len(flat.edge_job), n, n, len(flat.row_start) - 1)):
+        np.testing.assert_array_equal(p_[:size], w[:size])
     loc, job = want[3][:n], flat.row_job
     assert np.all(loc[flat.row_locate] >= 0)  # every region point located, in the kernel
     # Points in ears failed their sector guess: with one row per round, they

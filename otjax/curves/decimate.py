@@ -24,6 +24,7 @@ The driver of de Goes et al. 2011, Fig. 4, with the three queues otjax offers:
 
 from __future__ import annotations
 
+import copy
 import heapq
 import itertools
 import time
@@ -212,9 +213,13 @@ class _Scores:
         self.stats.seconds["score"] += time.perf_counter() - t1
         return flat, pending
 
-    def rescore(self, sources, targets: dict | None = None, keep_hot: bool = True) -> None:
+    def rescore(self, sources, targets: dict | None = None, keep_hot: bool = True, while_waiting=None) -> None:
         """Exports and scores the half-edges leaving ``sources`` (see
-        :meth:`TransportPlan.exports`), batch by batch."""
+        :meth:`TransportPlan.exports`), batch by batch.
+
+        ``while_waiting``: called once every batch is dispatched, before the
+        last ones are read: host work that overlaps the kernels.
+        """
         self.hot = {}
         self.entered = []
         sources = sorted(sources)
@@ -234,6 +239,8 @@ class _Scores:
             in_flight.append(exported)
             if len(in_flight) > IN_FLIGHT:
                 self._settle(*in_flight.pop(0), keep_hot)
+        if while_waiting is not None:
+            while_waiting()
         for flat, pending in in_flight:
             self._settle(flat, pending, keep_hot)
         if updates:
@@ -306,24 +313,26 @@ class _LiveVertices:
 
 
 def _sample_half_edges(plan: TransportPlan, live: _LiveVertices, rng: np.random.Generator,
-                       k: int) -> list[tuple[int, int]]:
+                       k: int, n_live: int | None = None) -> list[tuple[int, int]]:
     """Up to ``k`` distinct half-edges, uniform over the eligible ones.
 
     Rejection sampling: draw a live interior vertex ``u`` and a slot
     ``j < D`` (``D`` = the degree bound of candidate sources), keep
     ``(u, ring(u)[j])`` if the slot exists and the target is not pinned.
     Every eligible half-edge then has probability ``1 / (V D)`` per draw.
+    ``n_live``: draw among the first ``n_live`` live vertices only.
     """
     tri = plan.tri
     bound = plan.max_source_degree
     out: dict[tuple[int, int], None] = {}
     ids = live.ids
+    n_live = len(ids) if n_live is None else n_live
     for _ in range(64):  # each round accepts ~deg/D of its draws
         need = k - len(out)
-        if need <= 0 or not ids:
+        if need <= 0 or not n_live:
             break
         n = 4 * need * bound // 6 + 8
-        us = rng.integers(0, len(ids), n)
+        us = rng.integers(0, n_live, n)
         js = rng.integers(0, bound, n)
         for ui, j in zip(us.tolist(), js.tolist()):
             u = ids[ui]
@@ -479,6 +488,17 @@ def decimate(plan: TransportPlan, n_vertices: int | None = None, *, tolerance: f
 
     if queue == "multiple-choice":
         switch = switch_factor * target if n_vertices is not None else 0
+        def prefetch_next_draw():
+            # The next step's draw, on a copy of the generator: the same
+            # numbers as the real draw after the collapse (one vertex fewer
+            # in the live list), so mostly the same half-edges. Their stars
+            # are read into the caches while the kernel runs (the host is
+            # idle otherwise); the real draw then finds most of them there.
+            t0 = time.perf_counter()
+            guess = _sample_half_edges(plan, live, copy.deepcopy(rng), choices, n_live=len(live) - 1)
+            plan.prefetch([h for h in guess if not scores.fresh(h)])
+            stats.seconds["sample"] += time.perf_counter() - t0
+
         while len(live) > max(target, switch):
             t0 = time.perf_counter()
             drawn = _sample_half_edges(plan, live, rng, choices)
@@ -488,7 +508,7 @@ def decimate(plan: TransportPlan, n_vertices: int | None = None, *, tolerance: f
                 if not scores.fresh((u, w)):
                     stale.setdefault(u, []).append(w)
             if stale:
-                scores.rescore(stale, stale)
+                scores.rescore(stale, stale, while_waiting=prefetch_next_draw)
             best = min(((scores.entries[h][0], h) for h in drawn if scores.fresh(h)), default=None)
             if best is None:  # nothing admissible in this draw: the exhaustive queue decides
                 break

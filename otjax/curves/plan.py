@@ -442,6 +442,16 @@ class TransportPlan:
             out.append(self._host(*pending)[1])
         return np.concatenate(out)
 
+    def prefetch(self, half_edges) -> None:
+        """Reads the regions and collapse plans of ``half_edges`` into their
+        caches, where they stay valid until a change touches them: host work
+        to do while a kernel runs."""
+        tri = self.tri
+        for u, w in half_edges:
+            if tri.alive[u] and not tri.pinned[u] and len(tri.star(u)[0]) <= self.max_source_degree:
+                self._region(u)
+                self._plan(u, w)
+
     def exports(self, sources, targets: dict | None = None, budget: int = ROW_BUDGET):
         """Yields :meth:`export` batches of the half-edges leaving ``sources``.
 
@@ -748,7 +758,14 @@ class TransportPlan:
         """
         if not flat.cands:
             return None
-        r, floats, ints = flat.packed(self.points, self.mass)
+        need = flat.capacity()
+        # A compiled shape up to twice the need is reused rather than a new
+        # one compiled (~0.9 s each): the multiple-choice steps grow through
+        # every power of two below the 32k rows of the other batches, and
+        # padding one 16k-row batch costs ~2 ms (50k points: one compile
+        # fewer, 0.85 s).
+        r = min((c for c in self.shapes_seen if need <= c <= 2 * need), default=need)
+        floats, ints = flat.packed(self.points, self.mass, r)
         self.shapes_seen.add(r)
         self.n_kernel_calls += 1
         with jax.enable_x64(True):
@@ -976,16 +993,20 @@ class _Flat:
             job_theta=np.zeros(nj), job_ears=np.full((nj, _scoring.MAX_EARS), -1, np.int64),
             before=np.zeros(nj) if before is None else before)
 
-    def packed(self, points: np.ndarray, mass: np.ndarray) -> tuple[int, np.ndarray, np.ndarray]:
-        """The kernel's input: ``(R, floats, ints)``, padded to
-        :func:`scoring.capacity` and packed by :func:`scoring.layout`.
+    def capacity(self) -> int:
+        """The smallest row capacity that fits this batch (:func:`scoring.capacity`)."""
+        return _scoring.capacity(len(self.row_point), len(self.edge_job), len(self.tri_edges),
+                                 len(self.job_theta))
+
+    def packed(self, points: np.ndarray, mass: np.ndarray, r: int) -> tuple[np.ndarray, np.ndarray]:
+        """The kernel's input ``(floats, ints)`` at row capacity ``r`` (at
+        least :meth:`capacity`, a power of two), packed by :func:`scoring.layout`.
 
         Args:
           points, mass: the plan's ``(n, 2)`` points and ``(n,)`` masses,
             gathered here by row (cheaper than a kernel shape per ``n``).
         """
         nj, ne, nt, nr = len(self.job_theta), len(self.edge_job), len(self.tri_edges), len(self.row_point)
-        r = _scoring.capacity(nr, ne, nt, nj)
         where = _scoring.layout(r)
         floats = np.zeros(where["_sizes"][0])
         ints = np.zeros(where["_sizes"][1], np.int32)
@@ -1018,4 +1039,4 @@ class _Flat:
         view("edge_valid")[:ne] = 1
         view("edge_job")[:] = pad_job
         view("edge_job")[:ne] = self.edge_job
-        return r, floats, ints
+        return floats, ints
