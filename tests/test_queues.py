@@ -406,6 +406,28 @@ def test_changed_links_reports_star_changes_as_none():
         assert tri.star(v) == stars[v]
 
 
+def test_prefetching_the_next_draw_changes_nothing_but_the_caches(monkeypatch):
+    def run():
+        rng = np.random.default_rng(15)
+        pts = noisy_shape(rng, 500)
+        plan = TransportPlan(Triangulation(pts[::2]), pts, np.ones(len(pts)))
+        return run_queue(plan, "multiple-choice", incremental=True, target=10, relocation=10)
+
+    prefetched = []
+    prefetch = TransportPlan.prefetch
+
+    def counting(self, half_edges):
+        prefetched.extend(half_edges)
+        prefetch(self, half_edges)
+
+    monkeypatch.setattr(TransportPlan, "prefetch", counting)
+    with_prefetch, stats_ = run()
+    monkeypatch.setattr(TransportPlan, "prefetch", lambda self, half_edges: None)
+    without, _ = run()
+    assert with_prefetch == without
+    assert len(prefetched) > 5 * stats_.switched_at  # it did read ahead, most steps
+
+
 def test_multiple_choice_scores_far_fewer_candidates():
     pts, _ = otjax.datasets.star(1500, noise=0.01, seed=9)
     mc = otjax.reconstruct_curve(pts, n_vertices=10, queue="multiple-choice", relocation=0)
