@@ -351,10 +351,19 @@ class TransportPlan:
                 out |= keys
         return out
 
+    def record_changes(self, rec: LinkRecord) -> set | None:
+        """The link edges to update ``rec`` on, or ``None`` if it must be
+        scored again in full: its source's star changed, or the plan of its
+        half-edge did (the target's star changed how the collapse is made)."""
+        changed = self.changed_links(rec.plan.source, rec.version)
+        if changed is None or self._plan(rec.plan.source, rec.plan.target) != rec.plan:
+            return None
+        return changed
+
     def link_record(self, cand: CandidateStencil, scored: CandidateCost) -> LinkRecord:
         """The :class:`LinkRecord` of a scored collapse, valid at the current state."""
         ring = np.asarray(cand.plan.ring, np.int64)
-        nxt = np.roll(ring, -1)
+        nxt = np.asarray(cand.plan.ring[1:] + cand.plan.ring[:1], np.int64)
         nv = len(self.tri.xy)
         code = cand.keys[:, 0] * nv + cand.keys[:, 1]  # keys are sorted
         link_edge = np.searchsorted(code, np.minimum(ring, nxt) * nv + np.maximum(ring, nxt))
@@ -372,15 +381,13 @@ class TransportPlan:
         """Re-scores collapses whose link changed: the changed link edges only.
 
         Args:
-          items: ``(record, changed)`` pairs: a :class:`LinkRecord` whose
-            plan is still the source's plan for its target, and the keys of
-            its changed link edges (from :meth:`changed_links`).
+          items: ``(record, changed)`` pairs: a :class:`LinkRecord` and the
+            keys of its changed link edges (from :meth:`record_changes`).
 
         Returns:
           ``[(record, delta)]``: each record brought up to date, and the
-          collapse's cost increase; the same values (up to the order of
-          exact ties within an edge) as a full re-scoring, since each
-          edge's points come in the same order.
+          collapse's cost increase: the values of a full re-scoring, since
+          each edge gets the same points in the same order.
         """
         parts, edges, where = [], [], []
         for i, (rec, changed) in enumerate(items):
