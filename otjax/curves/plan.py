@@ -915,8 +915,7 @@ class TransportPlan:
         # The far vertex of a face across the region's boundary keeps its
         # star: only the points across that link edge changed (logged for
         # changed_links).
-        full = set(plan.ring)
-        full.add(plan.source)
+        full = {*plan.ring, plan.source}
         links: dict[int, set] = {}
         new_set = set(new_ids.tolist())
         for f in new_set:
@@ -929,9 +928,8 @@ class TransportPlan:
                         x, y = (u for u in tg if u != a)
                         links.setdefault(a, set()).add(edge_key(x, y))
         dirty = full | set(links)
-        dirty.discard(plan.source)
-        if cand.moved is not None:
-            dirty.add(plan.source)
+        if cand.moved is None:
+            dirty.discard(plan.source)  # removed by the collapse
         for v in dirty:
             self._region_version[v] += 1
             if v in links:
