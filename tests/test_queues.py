@@ -241,6 +241,73 @@ def test_point_capacity_follows_the_batch_not_history():
     assert buckets.batch_capacity(8192) * 8192 <= max(buckets.point_budget, 8192)
 
 
+@settings(max_examples=40, deadline=None)
+@given(rows=st.integers(0, 300_000), edges=st.integers(0, 80_000), tris=st.integers(0, 80_000),
+       jobs=st.integers(0, 20_000))
+def test_capacity_is_the_smallest_class_that_fits(rows, edges, tris, jobs):
+    """Classes: powers of two from MIN_ROWS, and above THREE_QUARTER_FROM also
+    three quarters of one; the capacity is the least class whose slots hold
+    the batch (R rows, R/4 edges and triangles, R/16 jobs, one kept)."""
+    from otjax.curves import scoring
+
+    classes = sorted({scoring.MIN_ROWS << k for k in range(12)}
+                     | {3 * (scoring.MIN_ROWS << k) // 4 for k in range(12)
+                        if 3 * (scoring.MIN_ROWS << k) // 4 > scoring.THREE_QUARTER_FROM})
+    fits = [c for c in classes if rows <= c and max(edges, tris) <= c // 4 and jobs + 1 <= c // 16]
+    assert scoring.capacity(rows, edges, tris, jobs) == fits[0]
+
+
+def test_reused_buffers_hold_what_fresh_ones_would():
+    """Batches of every size filled one after another into the same buffers:
+    after each fill the buffers equal fresh ones holding that batch alone."""
+    from otjax.curves.plan import PackedBuffers
+
+    plan = make_plan(np.random.default_rng(4), n=400)
+    sources = np.nonzero(plan.tri.alive & ~plan.tri.pinned)[0].tolist()
+    rng = np.random.default_rng(0)
+    flats = [next(plan.exports(sorted(rng.choice(sources, k, replace=False).tolist())))
+             for k in (40, 1, 12, 3, 25, 1, 40)]
+    flats.append(next(plan.relocation_exports([(v, plan.tri.xy[v] * (1 + 1e-9)) for v in sources[:5]])))
+    r = max(f.capacity() for f in flats)
+    assert len({len(f.row_point) for f in flats}) >= 6  # they do differ in size
+    reused = PackedBuffers(r)
+    for flat in flats:
+        got = flat.packed(plan.points, plan.mass, r, out=reused)
+        want = flat.packed(plan.points, plan.mass, r)
+        np.testing.assert_array_equal(got[0], want[0])
+        np.testing.assert_array_equal(got[1], want[1])
+    # A fresh one holds zeros but for the padding values.
+    fresh = PackedBuffers(r)
+    assert fresh.floats.ctypes.data % 64 == 0 and fresh.ints.ctypes.data % 64 == 0
+    with pytest.raises(ValueError, match="capacity"):
+        next(plan.exports(sources, budget=1 << 20)).packed(plan.points, plan.mass, r // 2, out=PackedBuffers(r // 2))
+
+
+def test_batches_fill_the_capacity_of_their_largest_candidate():
+    """A candidate over the budget does not leave its batch mostly padding:
+    later candidates join it up to its capacity; no batch outgrows the larger
+    of the budget and its largest candidate's own capacity."""
+    from otjax.curves import scoring
+
+    plan = make_plan(np.random.default_rng(3), n=30_000, subset=0.0015)
+    sources = np.nonzero(plan.tri.alive & ~plan.tri.pinned)[0].tolist()
+    budget = scoring.MIN_ROWS
+    alone = {}
+    for c in plan.candidates(sources):
+        alone[c.plan.source, c.plan.target] = scoring.capacity(len(c.point_ids), 2 * len(c.plan.new_triangles) + 1,
+                                                              len(c.plan.new_triangles), 1)
+    assert max(alone.values()) > budget  # the case under test
+    flats = list(plan.exports(sources, budget=budget))
+    merged = 0
+    for flat in flats:
+        own = max(alone[c.plan.source, c.plan.target] for c in flat.cands)
+        assert flat.capacity() <= max(budget, own)
+        merged += own > budget and len(flat.cands) > 1
+    assert merged >= 1
+    # Same candidates, in the same order, as one batch per source.
+    assert [c.plan for f in flats for c in f.cands] == [c.plan for v in sources for c in plan.export([v]).cands]
+
+
 # ------------------------------------------------------------------ sampling
 def eligible_half_edges(plan):
     tri = plan.tri
