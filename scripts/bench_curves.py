@@ -16,6 +16,10 @@ Runs are cold by default: every process compiles its kernels. With
 persistent compilation cache in DIR (what the command line keeps in
 ~/.cache/otjax), and the timed runs then read their kernels from it.
 
+Each row ends with a machine check (:func:`machine_check`, NumPy / XLA
+milliseconds of two fixed workloads, run after the timed run): the machine's
+speed when the row was measured.
+
 Prints a table and the fit ``time ~ n^k`` between 10k and 1M points, and writes
 JSON (``--json``). Runs of sizes up to ``--median-up-to`` are repeated
 ``--repeats`` times and the median run is reported.
@@ -78,6 +82,8 @@ def run_one(n: int, queue: str, seed: int, cache: str | None = None) -> dict:
     t0 = time.perf_counter()
     result = otjax.reconstruct_curve(points, n_vertices=target, queue=queue, seed=seed)
     wall = time.perf_counter() - t0
+    compiled_in_run = compile_s[0]
+    check = machine_check()
     h = result.history
     s = h["seconds"]
     corner = metrics.corner_errors(result.vertices, truth["corners"]) / truth["diagonal"] if len(
@@ -97,14 +103,52 @@ def run_one(n: int, queue: str, seed: int, cache: str | None = None) -> dict:
         "rounds": h["rounds"],
         "kernel_calls": h["kernel_calls"],
         "compiled_shapes": h["compiled_shapes"],
-        "compile_seconds": compile_s[0],
+        "compile_seconds": compiled_in_run,
         "peak_rss_mib": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
         "total_cost": result.total_cost,
         "n_vertices": len(result.vertices), "n_edges": len(result.edges),
         "corner_error_mean": float(np.mean(corner)) if len(truth["corners"]) <= len(result.vertices) else None,
         "backend": jax.default_backend(),
         "compile_cache": "warm" if cache else "cold",
+        "machine_check": check,
     }
+
+
+def machine_check() -> dict:
+    """Milliseconds of two fixed workloads, run after the timed run: the
+    machine's speed at the time of the row, to compare rows of a shared
+    machine whose speed drifts (this dev VM: 10-20% within an hour).
+
+    ``numpy_ms``: sorting 2^20 seeded random floats (one core, NumPy);
+    ``kernel_ms``: one scoring-kernel call on an empty 32768-row batch (XLA,
+    both cores; the shape every run above a few thousand points compiles).
+    Each is the median of 15 runs.
+    """
+    import time
+
+    import jax
+
+    from otjax.curves import scoring
+
+    x = np.random.default_rng(0).random(1 << 20)
+    r = 1 << 15
+    floats, ints = (np.zeros(k) for k in scoring.layout(r)["_sizes"])
+    ints = ints.astype(np.int32)
+
+    def kernel():
+        with jax.enable_x64(True):
+            jax.block_until_ready(scoring.score_packed(floats, ints, rows=r, dtype=np.float64))
+
+    def median_ms(f) -> float:
+        f()
+        times = []
+        for _ in range(15):
+            t0 = time.perf_counter()
+            f()
+            times.append(time.perf_counter() - t0)
+        return 1e3 * float(np.median(times))
+
+    return {"numpy_ms": median_ms(lambda: np.sort(x)), "kernel_ms": median_ms(kernel)}
 
 
 def run_child(n: int, queue: str, seed: int, timeout: float, cache: str | None = None) -> dict:
@@ -133,18 +177,20 @@ def fit_exponent(rows: list[dict], lo: int = 10_000, hi: int = 1_000_000) -> flo
 
 def table(rows: list[dict]) -> str:
     head = ("| n | queue | target | initial vertices | seconds | init / scoring / topology / relocation | "
-            "collapses/s | rounds | shapes | compile s | peak RSS MiB | total cost |")
+            "collapses/s | rounds | shapes | compile s | peak RSS MiB | total cost | machine check ms |")
     lines = [head, "|" + " --- |" * (head.count("|") - 1)]
     for r in rows:
         if "error" in r:
-            lines.append(f"| {r['n']} | {r['queue']} | | | {r['error']} | | | | | | | |")
+            lines.append(f"| {r['n']} | {r['queue']} | | | {r['error']} | | | | | | | | |")
             continue
         sp = r["split"]
+        mc = r.get("machine_check")  # rows of older runs have none
+        check = f"{mc['numpy_ms']:.1f} / {mc['kernel_ms']:.2f}" if mc else ""
         lines.append(
             f"| {r['n']} | {r['queue']}{' (warm cache)' if r.get('compile_cache') == 'warm' else ''} | {r['target']} | {r['initial_vertices']} | {r['seconds']:.2f} | "
             f"{sp['init']:.2f} / {sp['scoring']:.2f} / {sp['topology']:.2f} / {sp['relocation']:.2f} | "
             f"{r['collapses_per_second']:.0f} | {r['rounds']} | {r['compiled_shapes']} | "
-            f"{r['compile_seconds']:.2f} | {r['peak_rss_mib']:.0f} | {r['total_cost']:.6g} |")
+            f"{r['compile_seconds']:.2f} | {r['peak_rss_mib']:.0f} | {r['total_cost']:.6g} | {check} |")
     return "\n".join(lines)
 
 

@@ -26,6 +26,7 @@ def test_bench_curves_smallest_size(tmp_path):
         assert 1 <= r["compiled_shapes"] <= 12
         assert r["peak_rss_mib"] > 0 and r["total_cost"] > 0
         assert r["compile_cache"] == "cold"  # every run compiles unless --compile-cache is given
+        assert r["machine_check"]["numpy_ms"] > 0 and r["machine_check"]["kernel_ms"] > 0
     assert doc["fit_10k_1M"] == {"exhaustive": None, "multiple-choice": None, "parallel": None}
 
 
