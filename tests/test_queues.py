@@ -283,6 +283,24 @@ def test_reused_buffers_hold_what_fresh_ones_would():
         next(plan.exports(sources, budget=1 << 20)).packed(plan.points, plan.mass, r // 2, out=PackedBuffers(r // 2))
 
 
+def test_a_copied_plan_scores_like_the_original():
+    """Copies (deepcopy, pickle) of a plan whose buffer pool is in use get
+    fresh buffers, not copies whose field views no longer alias them."""
+    import copy
+    import pickle
+
+    plan = make_plan(np.random.default_rng(8), n=400)
+    sources = np.nonzero(plan.tri.alive & ~plan.tri.pinned)[0].tolist()
+    _, first, _ = plan.score_batches(plan.exports(sources[:20]))
+    _, second, _ = plan.score_batches(plan.exports(sources[20:]))
+    assert plan._buffers  # buffers went back to the pool, holding the second call's batch
+    for twin in (copy.deepcopy(plan), pickle.loads(pickle.dumps(plan))):
+        _, got, _ = twin.score_batches(twin.exports(sources[:20]))
+        np.testing.assert_array_equal(got, first)
+        _, got, _ = twin.score_batches(twin.exports(sources[20:]))
+        np.testing.assert_array_equal(got, second)
+
+
 def test_batches_fill_the_capacity_of_their_largest_candidate():
     """A candidate over the budget does not leave its batch mostly padding:
     later candidates join it up to its capacity; no batch outgrows the larger

@@ -465,12 +465,13 @@ class TransportPlan:
         """Yields :meth:`export` batches of the half-edges leaving ``sources``.
 
         Consecutive candidates are grouped so that each batch fits the row
-        capacity ``budget`` (a power of two; a single candidate may need
-        more): the kernel's cost is per padded row, and cutting a long list
-        of candidates into batches that fill their capacity keeps padding
-        small (cut by sources, half the rows were padding) and the shapes
-        few. A generator, so that the next batch is exported while the
-        kernel scores the last.
+        capacity ``budget`` (a capacity class; a candidate that needs more
+        is joined by the next ones up to its own capacity): the kernel's
+        cost is per padded row, and cutting a long list of candidates into
+        batches that fill their capacity keeps padding small (cut by
+        sources, half the rows were padding) and the shapes few. A
+        generator, so that the next batch is exported while the kernel
+        scores the last.
         """
         return self._batches((job for v in sources for job in self._collapse_jobs([v], targets)), budget)
 
@@ -1018,8 +1019,8 @@ class _Flat:
 
     def packed(self, points: np.ndarray, mass: np.ndarray, r: int,
                out: PackedBuffers | None = None) -> tuple[np.ndarray, np.ndarray]:
-        """The kernel's input ``(floats, ints)`` at row capacity ``r`` (at
-        least :meth:`capacity`, a power of two), packed by :func:`scoring.layout`.
+        """The kernel's input ``(floats, ints)`` at row capacity ``r`` (a
+        capacity class, at least :meth:`capacity`), packed by :func:`scoring.layout`.
 
         Args:
           points, mass: the plan's ``(n, 2)`` points and ``(n,)`` masses,
@@ -1077,6 +1078,12 @@ class PackedBuffers:
         v["fan_key"][:] = np.inf
         v["job_ears"][:] = -1
         self.used = (0, 0, 0, 0, 0)  # rows, edges, triangles, fan keys, jobs
+
+    def __reduce__(self):
+        # A copy (copy.deepcopy of a plan, pickling) is a fresh set: copied
+        # field views would no longer be views of the copied buffers, nor
+        # aligned.
+        return PackedBuffers, (self.r,)
 
     def fill(self, flat: _Flat, points: np.ndarray, mass: np.ndarray) -> None:
         """Writes ``flat`` (padded to ``r``) with its rows' points and masses."""

@@ -43,7 +43,7 @@ from otjax.stencil import EdgeStencil
 # Per-edge outputs, in the order of the kernel's (E, 6) array.
 EDGE_FIELDS = ("edge_cost", "normal", "tangential", "vertex", "edge_mass", "solid")
 # Smallest row capacity; every other capacity is a fixed fraction of it, so
-# that one number (a power of two) names a compiled shape.
+# that one number (see capacity) names a compiled shape.
 MIN_ROWS = 1 << 12
 EDGES_PER_ROW = 4  # E = T = R / 4
 JOBS_PER_ROW = 16  # J = R / 16
