@@ -122,7 +122,10 @@ def machine_check() -> dict:
     ``numpy_ms``: sorting 2^20 seeded random floats (one core, NumPy);
     ``kernel_ms``: one scoring-kernel call on an empty 32768-row batch (XLA,
     both cores; the shape every run above a few thousand points compiles).
-    Each is the median of 15 runs.
+    Each is the median of 15 runs. The kernel's inputs are plain (unaligned)
+    NumPy zeros, not the library's reused aligned buffers
+    (``plan.PackedBuffers``), so the call includes copying them: kept so,
+    as every recorded row was measured that way.
     """
     import time
 

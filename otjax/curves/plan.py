@@ -455,9 +455,8 @@ class TransportPlan:
         """Reads the regions and collapse plans of ``half_edges`` into their
         caches, where they stay valid until a change touches them: host work
         to do while a kernel runs."""
-        tri = self.tri
         for u, w in half_edges:
-            if tri.alive[u] and not tri.pinned[u] and len(tri.star(u)[0]) <= self.max_source_degree:
+            if self._collapsible_source(u):
                 self._region(u)
                 self._plan(u, w)
 
@@ -498,13 +497,16 @@ class TransportPlan:
         if jobs:
             yield self._export(jobs, on_host=False)
 
-    def _collapse_jobs(self, sources, targets):
+    def _collapsible_source(self, v: int) -> bool:
+        """Whether half-edges leaving ``v`` are candidates: live, free, and
+        of degree within the kernel's bound."""
         tri = self.tri
+        return bool(tri.alive[v]) and not tri.pinned[v] and len(tri.star(v)[0]) <= self.max_source_degree
+
+    def _collapse_jobs(self, sources, targets):
         jobs = []
         for v in sources:
-            if not tri.alive[v] or tri.pinned[v]:
-                continue
-            if len(tri.star(v)[0]) > self.max_source_degree:
+            if not self._collapsible_source(v):
                 continue
             region = self._region(v)
             ring = region[0]
@@ -1090,7 +1092,7 @@ class PackedBuffers:
         v = self.v
         nr, ne, nt = len(flat.row_point), len(flat.edge_job), len(flat.tri_edges)
         nf, nj = len(flat.fan_key), len(flat.job_theta)
-        if _scoring.capacity(nr, ne, nt, nj) > self.r:
+        if flat.capacity() > self.r:
             raise ValueError(f"batch needs capacity {flat.capacity()}, buffers have {self.r}")
         r0, e0, t0, f0, j0 = self.used
         # What the previous batch wrote past this one goes back to padding.
