@@ -322,8 +322,47 @@ def test_batches_fill_the_capacity_of_their_largest_candidate():
         assert flat.capacity() <= max(budget, own)
         merged += own > budget and len(flat.cands) > 1
     assert merged >= 1
-    # Same candidates, in the same order, as one batch per source.
-    assert [c.plan for f in flats for c in f.cands] == [c.plan for v in sources for c in plan.export([v]).cands]
+    # Same candidates as one batch per source, each once; seq gives their
+    # place in source then ring order.
+    packed = [c.plan for f in flats for c in f.cands]
+    order = np.argsort(np.concatenate([f.seq for f in flats]))
+    assert [packed[i] for i in order] == [c.plan for v in sources for c in plan.export([v]).cands]
+    # score_batches puts them back in that order, with their own scores.
+    cands, delta, _ = plan.score_batches(plan.exports(sources, budget=budget))
+    assert [c.plan for c in cands] == [packed[i] for i in order]
+    for v in sources[:10]:
+        mine = [d for c, d in zip(cands, delta) if c.plan.source == v]
+        np.testing.assert_array_equal(mine, plan.score_batches([plan.export([v])])[1])
+
+
+@settings(max_examples=80, deadline=None)
+@given(sizes=st.lists(st.tuples(st.integers(1, 70_000), st.integers(1, 60)), min_size=0, max_size=120),
+       budget=st.sampled_from([4096, 8192, 1 << 15]))
+def test_first_fit_packing_is_a_partition_within_limits(sizes, budget):
+    """Every job in one batch; a batch within the larger of the budget and
+    its largest job's own capacity; and first fit: no job of a later batch
+    would have fitted an earlier one (batches only grow, so it did not fit
+    then either)."""
+    from otjax.curves import scoring
+    from otjax.curves.plan import pack_first_fit
+
+    jobs = [(r, 2 * t + 1, t) for r, t in sizes]
+    batches = pack_first_fit(jobs, budget)
+    assert sorted(i for b in batches for i in b) == list(range(len(jobs)))
+    assert all(b == sorted(b) for b in batches)
+
+    def total(b):
+        return [sum(jobs[i][k] for i in b) for k in range(3)] + [len(b)]
+
+    limits = [max(budget, max(scoring.capacity(*jobs[i], 1) for i in b)) for b in batches]
+    for b, limit in zip(batches, limits):
+        assert scoring.capacity(*total(b)) <= limit
+    for j, later in enumerate(batches):
+        for i in range(j):
+            rows, edges, tris, n = total(batches[i])
+            for x in later:
+                r, e, t = jobs[x]
+                assert scoring.capacity(rows + r, edges + e, tris + t, n + 1) > limits[i]
 
 
 # ------------------------------------------------------------------ sampling

@@ -39,6 +39,10 @@ _NO_IDS = np.zeros(0, np.int64)
 # rather than 2^16: one compiled shape fewer below 200k points (50k: 19.6 ->
 # 18.3 s, 200k: 44.0 -> 41.2 s; 1M unchanged, its stars need 2^16 alone).
 ROW_BUDGET = 1 << 15
+# What one more kernel call costs, in padded rows: a call's fixed cost
+# (dispatch, reading results back, ~0.25 ms) over the cost of a row
+# (~0.125 us): 4096 rows 0.76 ms, 8192 rows 1.27 ms, 32768 rows 4.34 ms.
+CALL_ROWS = 1 << 11
 # Link changes remembered per vertex (see TransportPlan.changed_links); an
 # older record is treated as a change of the star.
 _LINK_LOG = 64
@@ -157,6 +161,44 @@ def segment_sqdist_np(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray
     interior = np.divide(cross**2, den, out=np.zeros_like(cross), where=den > 0)
     return np.where(along <= 0, np.sum(pa * pa, -1),
                     np.where(np.sum(pb * d, -1) >= 0, np.sum(pb * pb, -1), interior))
+
+
+def pack_first_fit(sizes, budget: int) -> list[list[int]]:
+    """Groups jobs into kernel batches, first fit by decreasing rows.
+
+    The kernel's cost is per padded row (a padding row costs ~80% of a real
+    one, measured), so the batches should fill their capacity. Cut in
+    export order, a long list of stars of a few thousand rows each left a
+    quarter of each 32k-row batch empty; sorted by size and placed first
+    fit, the small candidates fill the gaps the large ones leave (50k
+    points, last 40 collapses: 28.9M padded rows -> 26.0M, 926 -> 839 calls).
+
+    Args:
+      sizes: ``(rows, edges, triangles)`` of each job.
+      budget: row capacity of a batch (a capacity class); a job that needs
+        more opens a batch of its own capacity, which smaller jobs then fill.
+
+    Returns:
+      Batches as lists of job indices, each in increasing order; every job
+      in exactly one. A batch holds jobs while :func:`scoring.capacity` of
+      its totals stays within its limit (the larger of ``budget`` and its
+      first job's own capacity), and a job goes to the first batch with room.
+    """
+    order = sorted(range(len(sizes)), key=lambda i: -sizes[i][0])
+    bins: list[list] = []  # [members, rows, edges, triangles, limit]
+    for i in order:
+        r, e, t = sizes[i]
+        for b in bins:
+            # Rows bind first: skip the capacity call for batches without room.
+            if b[1] + r <= b[4] and _scoring.capacity(b[1] + r, b[2] + e, b[3] + t, len(b[0]) + 1) <= b[4]:
+                b[0].append(i)
+                b[1] += r
+                b[2] += e
+                b[3] += t
+                break
+        else:
+            bins.append([[i], r, e, t, max(budget, _scoring.capacity(r, e, t, 1))])
+    return [sorted(b[0]) for b in bins]
 
 
 class TransportPlan:
@@ -463,14 +505,15 @@ class TransportPlan:
     def exports(self, sources, targets: dict | None = None, budget: int = ROW_BUDGET):
         """Yields :meth:`export` batches of the half-edges leaving ``sources``.
 
-        Consecutive candidates are grouped so that each batch fits the row
-        capacity ``budget`` (a capacity class; a candidate that needs more
-        is joined by the next ones up to its own capacity): the kernel's
-        cost is per padded row, and cutting a long list of candidates into
-        batches that fill their capacity keeps padding small (cut by
-        sources, half the rows were padding) and the shapes few. A
+        Candidates are packed into batches of row capacity ``budget`` (a
+        capacity class; a candidate that needs more gets its own capacity,
+        filled by smaller ones) by :func:`pack_first_fit`: the kernel's cost
+        is per padded row, and full batches keep padding small (cut by
+        sources, half the rows were padding) and the shapes few. Sizes come
+        from the cached regions and plans; the export itself is a
         generator, so that the next batch is exported while the kernel
-        scores the last.
+        scores the last. Each batch's ``seq`` says where its candidates
+        stand in source then ring order.
         """
         return self._batches((job for v in sources for job in self._collapse_jobs([v], targets)), budget)
 
@@ -479,23 +522,31 @@ class TransportPlan:
         return self._batches(self._relocation_jobs(moves), budget)
 
     def _batches(self, jobs_iter, budget: int):
-        jobs, rows, edges, tris, limit = [], 0, 0, 0, budget
-        for job in jobs_iter:
-            r = len(job[2][2]) + len(job[2][3])
-            t = len(job[1])
-            # Edges of a triangulated disc of t triangles: at most 2 t + 1.
-            alone = _scoring.capacity(r, 2 * t + 1, t, 1)
-            # A batch that holds a candidate larger than the budget has that
-            # candidate's capacity anyway: it is filled up to it rather than
-            # scored alone (1M points, last collapses: such batches were 62%
-            # padding).
-            if jobs and _scoring.capacity(rows + r, edges + 2 * t + 1, tris + t, len(jobs) + 1) > max(limit, alone):
-                yield self._export(jobs, on_host=False)
-                jobs, rows, edges, tris, limit = [], 0, 0, 0, budget
-            jobs.append(job)
-            rows, edges, tris, limit = rows + r, edges + 2 * t + 1, tris + t, max(limit, alone)
-        if jobs:
-            yield self._export(jobs, on_host=False)
+        jobs = list(jobs_iter)
+        # Edges of a triangulated disc of t triangles: at most 2 t + 1.
+        sizes = [(len(job[2][2]) + len(job[2][3]), 2 * len(job[1]) + 1, len(job[1])) for job in jobs]
+        packing = pack_first_fit(sizes, budget)
+        # A batch of 8-16k rows pads to a compiled 32k shape: two calls of an
+        # 8k shape cost less (and run side by side). The smaller compiled
+        # budgets are tried too, and the packing with the fewest padded rows
+        # (a call counted as CALL_ROWS more) is kept.
+        for smaller in sorted(c for c in self.shapes_seen if c < budget):
+            other = pack_first_fit(sizes, smaller)
+            if self._padded_rows(other, sizes) < self._padded_rows(packing, sizes):
+                packing = other
+        for members in packing:
+            flat = self._export([jobs[i] for i in members], on_host=False)
+            flat.seq = np.asarray(members, np.int64)
+            yield flat
+
+    def _padded_rows(self, packing, sizes) -> int:
+        """Rows the kernel calls of ``packing`` would pad to, plus
+        :data:`CALL_ROWS` per call."""
+        total = 0
+        for members in packing:
+            r, e, t = (sum(sizes[i][k] for i in members) for k in range(3))
+            total += self._shape_for(_scoring.capacity(r, e, t, len(members))) + CALL_ROWS
+        return total
 
     def _collapsible_source(self, v: int) -> bool:
         """Whether half-edges leaving ``v`` are candidates: live, free, and
@@ -775,15 +826,7 @@ class TransportPlan:
         """
         if not flat.cands:
             return None
-        need = flat.capacity()
-        # A compiled shape up to twice the need is reused rather than a new
-        # one compiled (~0.9 s each): the multiple-choice steps grow through
-        # every power of two below the 32k rows of the other batches, and
-        # padding one 16k-row batch costs ~2 ms (50k points: one compile
-        # fewer, 0.85 s). Larger batches, a star's candidates each, come by
-        # the thousand late in a large run: their own shape pays.
-        reuse = 2 * need if need <= ROW_BUDGET else need
-        r = min((c for c in self.shapes_seen if need <= c <= reuse), default=need)
+        r = self._shape_for(flat.capacity())
         free = self._buffers.get(r)
         buffers = free.pop() if free else PackedBuffers(r)
         floats, ints = flat.packed(self.points, self.mass, r, out=buffers)
@@ -791,6 +834,19 @@ class TransportPlan:
         self.n_kernel_calls += 1
         with jax.enable_x64(True):
             return _scoring.score_packed(floats, ints, rows=r, dtype=self.dtype), buffers
+
+    def _shape_for(self, need: int) -> int:
+        """Row capacity a batch that needs ``need`` rows is scored at.
+
+        A compiled shape up to twice the need is reused rather than a new
+        one compiled (~0.9 s each): the multiple-choice steps grow through
+        every power of two below the 32k rows of the other batches, and
+        padding one 16k-row batch costs ~2 ms (50k points: one compile
+        fewer, 0.85 s). Larger batches, a star's candidates each, come by
+        the thousand late in a large run: their own shape pays.
+        """
+        reuse = 2 * need if need <= ROW_BUDGET else need
+        return min((c for c in self.shapes_seen if need <= c <= reuse), default=need)
 
     def _host(self, flat: _Flat, pending):
         """The kernel's outputs as host arrays, cut to the batch's real jobs,
@@ -862,24 +918,30 @@ class TransportPlan:
         each batch is dispatched before the last one is collected.
 
         Returns:
-          ``(cands, delta, costs)`` over all batches, in order.
+          ``(cands, delta, costs)`` over all batches, in the order of the
+          jobs they were exported from (batches packed out of order, see
+          :func:`pack_first_fit`, are put back in it), else in batch order.
         """
-        cands, deltas, costs = [], [np.zeros(0)], []
+        cands, deltas, costs, seqs = [], [np.zeros(0)], [], [_NO_IDS]
         pending = None
+
+        def read(flat, handle):
+            d, c = self.collect(flat, handle)
+            deltas.append(d)
+            costs.extend(c)
+            seqs.append(len(cands) + np.arange(len(flat.cands)) if flat.seq is None else flat.seq)
+            cands.extend(flat.cands)
+
         for flat in flats:
             handle = self.dispatch(flat)
             if pending is not None:
-                d, c = self.collect(*pending)
-                deltas.append(d)
-                costs += c
-                cands += pending[0].cands
+                read(*pending)
             pending = (flat, handle)
         if pending is not None:
-            d, c = self.collect(*pending)
-            deltas.append(d)
-            costs += c
-            cands += pending[0].cands
-        return cands, np.concatenate(deltas), costs
+            read(*pending)
+        delta = np.concatenate(deltas)
+        order = np.argsort(np.concatenate(seqs), kind="stable")
+        return [cands[i] for i in order], delta[order], [costs[i] for i in order]
 
     # ------------------------------------------------------------- mutation
     def apply(self, cand: CandidateStencil, scored: CandidateCost) -> set[int]:
@@ -969,7 +1031,8 @@ class _Flat:
     the kernel; the others: ``row_tri`` (local triangle of a row located on
     the host, else ``-1``), ``row_start``, ``edge_start``, ``tri_start``
     (``(J + 1,)`` offsets per job) and ``before`` (``(J,)``). Unpadded and
-    with ids of any width: :meth:`packed` pads and narrows them.
+    with ids of any width: :meth:`packed` pads and narrows them. ``seq``:
+    where each job stands in the list a packed export was made from.
     """
 
     cands: list
@@ -992,6 +1055,7 @@ class _Flat:
     job_theta: np.ndarray
     job_ears: np.ndarray
     before: np.ndarray
+    seq: np.ndarray | None = None  # position of each job in the export's job list (see _batches)
 
     @classmethod
     def empty(cls) -> _Flat:
