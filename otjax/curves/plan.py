@@ -526,12 +526,12 @@ class TransportPlan:
         # Edges of a triangulated disc of t triangles: at most 2 t + 1.
         sizes = [(len(job[2][2]) + len(job[2][3]), 2 * len(job[1]) + 1, len(job[1])) for job in jobs]
         packing = pack_first_fit(sizes, budget)
-        # A batch of 8-16k rows pads to a compiled 32k shape: two calls of an
-        # 8k shape cost less (and run side by side). The smaller compiled
-        # budgets are tried too, and the packing with the fewest padded rows
-        # (a call counted as CALL_ROWS more) is kept.
-        for smaller in sorted(c for c in self.shapes_seen if c < budget):
-            other = pack_first_fit(sizes, smaller)
+        # A batch of 4-16k rows pads to the budget's shape (see _shape_for):
+        # a few calls of the smallest shape may cost less (and run side by
+        # side). The packing with the fewer padded rows (a call counted as
+        # CALL_ROWS more) is kept.
+        if budget > _scoring.MIN_ROWS:
+            other = pack_first_fit(sizes, _scoring.MIN_ROWS)
             if self._padded_rows(other, sizes) < self._padded_rows(packing, sizes):
                 packing = other
         for members in packing:
@@ -835,18 +835,22 @@ class TransportPlan:
         with jax.enable_x64(True):
             return _scoring.score_packed(floats, ints, rows=r, dtype=self.dtype), buffers
 
-    def _shape_for(self, need: int) -> int:
+    @staticmethod
+    def _shape_for(need: int) -> int:
         """Row capacity a batch that needs ``need`` rows is scored at.
 
-        A compiled shape up to twice the need is reused rather than a new
-        one compiled (~0.9 s each): the multiple-choice steps grow through
-        every power of two below the 32k rows of the other batches, and
-        padding one 16k-row batch costs ~2 ms (50k points: one compile
-        fewer, 0.85 s). Larger batches, a star's candidates each, come by
-        the thousand late in a large run: their own shape pays.
+        At or below the budget, two shapes only: ``MIN_ROWS`` and
+        ``ROW_BUDGET``. Each shape costs ~1 s of compilation (two cores
+        busy); batches between the two are packed into ``MIN_ROWS`` calls
+        where their candidates allow (:meth:`_batches`), and the few that
+        do not pad to the budget (50k points: the 8192-row shape compiled
+        mid-run cost more than the padding it saved). Larger batches, a
+        star's candidates each, come by the thousand late in a large run:
+        their own capacity class pays.
         """
-        reuse = 2 * need if need <= ROW_BUDGET else need
-        return min((c for c in self.shapes_seen if need <= c <= reuse), default=need)
+        if need <= _scoring.MIN_ROWS:
+            return _scoring.MIN_ROWS
+        return ROW_BUDGET if need <= ROW_BUDGET else need
 
     def _host(self, flat: _Flat, pending):
         """The kernel's outputs as host arrays, cut to the batch's real jobs,
