@@ -491,6 +491,7 @@ def check_same_greedy(queue, n, seed, subset):
     # is the same as a full re-scoring's.
     assert updated == full
     assert full_stats.updated == 0 < stats_.updated
+    assert full_stats.partial == 0 < stats_.partial
     assert stats_.scored < full_stats.scored
 
 
@@ -522,6 +523,41 @@ def test_each_link_update_equals_a_full_scoring(seed, monkeypatch, update_everyt
     monkeypatch.setattr(TransportPlan, "link_updates", checking)
     stats_ = decimate(plan, 10, queue="exhaustive", relocation=20)
     assert stats_.updated == len(checked) > 100
+    plan.tri.check()
+    assert plan.total_cost() == pytest.approx(scratch_cost(plan.tri, pts, mass), rel=1e-9)
+
+
+@pytest.mark.parametrize("seed", [12, 16])
+def test_each_partial_update_equals_a_full_scoring(seed, monkeypatch, update_everything):
+    """After a ring vertex moved, the collapse re-scored on the part the move
+    reaches has the full kernel scoring's edge costs bit for bit, and its
+    record the full scoring's triangle and edge of every point."""
+    rng = np.random.default_rng(seed)
+    pts = noisy_shape(rng, 500)
+    mass = rng.uniform(0.5, 2.0, len(pts))
+    plan = TransportPlan(Triangulation(pts[::2]), pts, mass)
+    checked, smaller = [], []
+    finish = TransportPlan.finish_partial
+
+    def checking(self, pending, cand, scored):
+        rec, delta = finish(self, pending, cand, scored)
+        v, w = rec.plan.source, rec.plan.target
+        rows = len(rec.inside) + len(self._region(v)[3])
+        assert len(cand.point_ids) <= rows
+        smaller.append(len(cand.point_ids) < rows)
+        _, full_delta, (cost,) = self.score_batches(self.exports([v], {v: [w]}))
+        np.testing.assert_array_equal(rec.edge_cost, cost.edge_cost)
+        n = len(rec.inside)
+        np.testing.assert_array_equal(rec.triangle, cost.triangle[:n])
+        np.testing.assert_array_equal(rec.edge, cost.assignment[:n])
+        assert delta == pytest.approx(full_delta[0], rel=1e-12, abs=1e-14)
+        checked.append(delta)
+        return rec, delta
+
+    monkeypatch.setattr(TransportPlan, "finish_partial", checking)
+    stats_ = decimate(plan, 10, queue="exhaustive", relocation=40)
+    assert stats_.partial == len(checked) > 50
+    assert sum(smaller) > len(smaller) / 2  # most are a part of the stencil only
     plan.tri.check()
     assert plan.total_cost() == pytest.approx(scratch_cost(plan.tri, pts, mass), rel=1e-9)
 

@@ -59,6 +59,9 @@ class DecimationStats:
       scored: number of candidate stencils scored.
       updated: number of scored collapses brought up to date on their
         changed link edges only (see :class:`~otjax.curves.plan.LinkRecord`).
+      partial: number of scored collapses scored again on the part of
+        their stencil that moves of ring vertices changed (also in
+        ``scored``; :meth:`~otjax.curves.plan.TransportPlan.partial_job`).
       kernel_calls: number of batched kernel calls.
       rounds: number of rounds (one per collapse, except in parallel mode).
       switched_at: live vertex count at which the multiple-choice queue
@@ -72,6 +75,7 @@ class DecimationStats:
     relocations: int = 0
     scored: int = 0
     updated: int = 0
+    partial: int = 0
     kernel_calls: int = 0
     rounds: int = 0
     switched_at: int | None = None
@@ -133,6 +137,7 @@ class _Scores:
         # veto, which reads every edge's parts.
         self.records: dict[int, dict] | None = None
         self.entered: list = []  # keys scored by the current rescore, to push
+        self.partial: dict = {}  # key -> what finish_partial needs, this rescore
         # Exact ties (zero-cost collapses along clean straight runs) pop in
         # insertion order, i.e. by vertex id, i.e. along the run: neighbours
         # first. The parallel queue wants them spread out, so it breaks ties
@@ -171,9 +176,16 @@ class _Scores:
     def _settle(self, flat, pending, keep_hot: bool) -> None:
         """Enters a dispatched batch's scores in the queue."""
         for c, r in zip(flat.cands, self._collect(flat, pending)):
+            key = (c.plan.source, c.plan.target)
+            part = self.partial.pop(key, None)
+            if part is not None:  # scored in part: not a whole stencil, never hot
+                rec, delta = self.plan.finish_partial(part, c, r)
+                self.records.setdefault(key[0], {})[key[1]] = rec
+                self._enter(key, delta)
+                self.stats.partial += 1
+                continue
             if self.admissible is not None and not self.admissible(c, r):
                 continue
-            key = (c.plan.source, c.plan.target)
             delta = r.delta
             if self.records is not None and len(c.point_ids) >= UPDATE_MIN_ROWS:
                 rec = self.plan.link_record(c, r)
@@ -188,24 +200,32 @@ class _Scores:
         self.entered.append(key)
 
     def _split(self, sources):
-        """Sources' half-edges to score in full (``{source: targets}``), and
-        ``(record, changed links)`` of those only their link changed."""
+        """Sources' half-edges to score in full (``{source: targets}``),
+        ``(record, changed links)`` of those only their link changed, and
+        ``(job, pending)`` of those a ring move changed in part
+        (:meth:`TransportPlan.partial_job`)."""
         plan = self.plan
         tri = plan.tri
         full: dict[int, list[int]] = {}
-        updates = []
+        updates, partial = [], []
         for v in sources:
             recs = self.records.pop(v, {})
             if not tri.alive[v] or tri.pinned[v]:
                 continue
             for w in tri.star(v)[0]:
                 rec = recs.get(w)
-                changed = None if rec is None else plan.record_changes(rec)
-                if changed is not None:
-                    updates.append((rec, changed))
-                else:
-                    full.setdefault(v, []).append(w)
-        return full, updates
+                changes = None if rec is None else plan.record_changes(rec)
+                part = None
+                if changes is not None and changes[1]:
+                    part = plan.partial_job(rec, *changes)
+                    if part is not None:
+                        partial.append(part)
+                        continue
+                elif changes is not None:
+                    updates.append((rec, changes[0]))
+                    continue
+                full.setdefault(v, []).append(w)
+        return full, updates, partial
 
     def _dispatch(self, exports):
         """Next batch of ``exports`` (a generator: exports as it goes), dispatched."""
@@ -229,11 +249,12 @@ class _Scores:
         self.hot = {}
         self.entered = []
         sources = sorted(sources)
-        full, updates = sources, []
+        full, updates, partial = sources, [], []
         if self.records is not None and targets is None:
-            targets, updates = self._split(sources)
+            targets, updates, partial = self._split(sources)
             full = sorted(targets)
-        exports = self.plan.exports(full, targets)
+        self.partial = {(job[0].source, job[0].target): pending for job, pending in partial}
+        exports = self.plan.exports(full, targets, extra=[job for job, _ in partial])
         # Batches are exported while earlier ones are scored, and a few are
         # kept in flight: XLA:CPU then runs two at once on two cores (a 64k-row
         # batch: 10.6 ms each instead of 13.7 ms, measured).

@@ -108,13 +108,20 @@ class CandidateCost(NamedTuple):
 
 
 class LinkRecord(NamedTuple):
-    """What re-scoring a scored collapse needs when only its link changed.
+    """What re-scoring a scored collapse needs when part of its stencil changed.
 
     A change next to the star of ``source`` (not in it) alters the points
     across some of its link edges and nothing else of its collapse stencils:
     their after-costs differ on those link edges only. Each link edge after
     the collapse holds the points of the changed region assigned to it
     (unchanged while the plan is) and the points across it that keep it.
+
+    A move of a ring vertex ``m`` (relocation) changes the new triangles at
+    ``m`` and the points across the link edges next to it; every other new
+    triangle keeps its shape, hence its points and their edges. Only the
+    edges of the changed triangles (and of the changed link edges) are
+    scored again, on the subsequence of the full stencil that can reach
+    them (see :meth:`TransportPlan.partial_job`).
 
     Attributes:
       plan: the collapse plan scored.
@@ -126,6 +133,11 @@ class LinkRecord(NamedTuple):
       link_start: ``(n + 1,)`` offsets of each link edge's points in ``link_points``.
       link_points: points of the changed region assigned to each link edge,
         in stencil order.
+      inside: ``(P,)`` the region's points when scored, in stencil order
+        (the region's own array, shared by the records of one source).
+      triangle: ``(P,)`` int16 index into ``plan.new_triangles`` of the new
+        triangle holding each point of ``inside``.
+      edge: ``(P,)`` int16 local edge each point of ``inside`` goes to.
     """
 
     plan: CollapsePlan
@@ -135,6 +147,9 @@ class LinkRecord(NamedTuple):
     link_edge: np.ndarray
     link_start: np.ndarray
     link_points: np.ndarray
+    inside: np.ndarray
+    triangle: np.ndarray
+    edge: np.ndarray
 
     def delta(self, before: float) -> float:
         """Cost increase of the collapse against the region's ``before``.
@@ -239,7 +254,8 @@ class TransportPlan:
         # changed_links): the region version of the last change of the star
         # itself, and since then the link edges whose far side changed.
         self._star_changed_at: dict[int, int] = {}
-        self._link_log: dict[int, list[tuple[int, frozenset]]] = {}
+        self._link_log: dict[int, list[tuple[int, frozenset, frozenset]]] = {}
+        self._slot: np.ndarray | None = None  # scratch of _positions
         self._plans: dict[tuple[int, int], tuple] = {}
         self.pt_face = self._initial_location()
         self.face_pts: list[np.ndarray] = [np.zeros(0, np.int64)] * len(tri.tri)
@@ -386,40 +402,146 @@ class TransportPlan:
 
     def changed_links(self, v: int, since: int) -> set | None:
         """Link edges of ``v``'s star whose far side changed after region
-        version ``since``; ``None`` if the star itself may have changed."""
+        version ``since``; ``None`` if the star itself may have changed
+        (its triangles, or the position of a ring vertex)."""
+        changes = self._changes(v, since)
+        return None if changes is None or changes[1] else changes[0]
+
+    def _changes(self, v: int, since: int) -> tuple[set, set] | None:
+        """``(link edge keys, moved ring vertices)`` changed around ``v``
+        after region version ``since``, or ``None`` if its triangles did."""
         if self._star_changed_at.get(v, -1) > since:
             return None
-        out: set = set()
-        for version, keys in self._link_log.get(v, ()):
+        keys: set = set()
+        moved: set = set()
+        for version, k, m in self._link_log.get(v, ()):
             if version > since:
-                out |= keys
-        return out
+                keys |= k
+                moved |= m
+        return keys, moved
 
-    def record_changes(self, rec: LinkRecord) -> set | None:
-        """The link edges to update ``rec`` on, or ``None`` if it must be
-        scored again in full: its source's star changed, or the plan of its
-        half-edge did (the target's star changed how the collapse is made)."""
-        changed = self.changed_links(rec.plan.source, rec.version)
-        if changed is None or self._plan(rec.plan.source, rec.plan.target) != rec.plan:
+    def record_changes(self, rec: LinkRecord) -> tuple[set, set] | None:
+        """What changed since ``rec`` was scored: ``(link edge keys, moved
+        ring vertices)``, or ``None`` if it must be scored again in full:
+        its source's star changed, its target moved, or the plan of its
+        half-edge changed (the target's star changed how the collapse is
+        made)."""
+        changes = self._changes(rec.plan.source, rec.version)
+        if changes is None or rec.plan.target in changes[1]:
             return None
-        return changed
+        if self._plan(rec.plan.source, rec.plan.target) != rec.plan:
+            return None
+        return changes
 
     def link_record(self, cand: CandidateStencil, scored: CandidateCost) -> LinkRecord:
         """The :class:`LinkRecord` of a scored collapse, valid at the current state."""
-        ring = np.asarray(cand.plan.ring, np.int64)
-        nxt = np.asarray(cand.plan.ring[1:] + cand.plan.ring[:1], np.int64)
+        n = cand.n_inside
+        inside = self._region(cand.plan.source)[2]
+        if len(inside) != n:
+            raise RuntimeError("the region changed since the candidate was exported")
+        return self._record(cand.plan, cand.keys, np.asarray(scored.edge_cost, np.float64), inside,
+                            scored.triangle[:n].astype(np.int16), scored.assignment[:n].astype(np.int16))
+
+    def _record(self, plan: CollapsePlan, keys, edge_cost, inside, triangle, edge) -> LinkRecord:
+        ring = np.asarray(plan.ring, np.int64)
+        nxt = np.asarray(plan.ring[1:] + plan.ring[:1], np.int64)
         nv = len(self.tri.xy)
-        code = cand.keys[:, 0] * nv + cand.keys[:, 1]  # keys are sorted
+        code = keys[:, 0] * nv + keys[:, 1]  # keys are sorted
         link_edge = np.searchsorted(code, np.minimum(ring, nxt) * nv + np.maximum(ring, nxt))
         which = np.full(len(code), -1, np.int64)
         which[link_edge] = np.arange(len(ring))
-        k = which[scored.assignment[: cand.n_inside]]
+        k = which[edge]
         on_link = np.flatnonzero(k >= 0)
         order = on_link[np.argsort(k[on_link], kind="stable")]
         start = np.searchsorted(k[order], np.arange(len(ring) + 1))
-        return LinkRecord(cand.plan, self._region_version[cand.plan.source], cand.keys,
-                          np.asarray(scored.edge_cost, np.float64), link_edge, start,
-                          cand.point_ids[order])
+        return LinkRecord(plan, self._region_version[plan.source], keys, edge_cost, link_edge, start,
+                          inside[order], inside, triangle, edge)
+
+    def partial_job(self, rec: LinkRecord, changed: set, moved: set):
+        """The part of ``rec``'s collapse that ring moves (and link changes)
+        since it was scored reach, as an export job, or ``None`` if that is
+        all of it.
+
+        Affected: the local edges of the new triangles with a moved vertex,
+        and the link edges whose far side changed (listed in ``changed``,
+        or across a face with a moved vertex). The job's rows are the
+        subsequence of the full stencil's rows (same order) that can reach
+        an affected edge: points not known to lie in an unchanged new
+        triangle (located by the kernel: they lie in a changed one), points
+        of unchanged triangles recorded on an affected edge (fixed to it),
+        and the points across affected link edges. An edge whose points
+        come in another order than when scored (a move rebuilds the point
+        lists of its faces) is affected too: its sum would round otherwise. Each affected edge thus
+        gets the points a full scoring would give it, in the same order,
+        and the kernel's costs for it are the full scoring's, bit for bit.
+
+        Returns:
+          ``(job, pending)``: the job for :meth:`exports` (``extra``) and
+          what :meth:`finish_partial` needs with its scores.
+        """
+        plan = rec.plan
+        v = plan.source
+        tri = self.tri
+        ring, star, inside, outside, outside_link, before = self._region(v)
+        tris = np.asarray(plan.new_triangles, np.int64)
+        mv = np.fromiter(moved, np.int64, len(moved))
+        changed_tri = np.isin(tris, mv).any(1)
+        if changed_tri.all():
+            return None
+        nv = len(tri.xy)
+        code = rec.keys[:, 0] * nv + rec.keys[:, 1]
+        e = np.sort(np.stack([tris, tris[:, [1, 2, 0]]], -1), -1)[changed_tri].reshape(-1, 2)
+        affected = np.zeros(len(code), bool)
+        affected[np.searchsorted(code, e[:, 0] * nv + e[:, 1])] = True
+        n = len(ring)
+        for k in range(n):
+            f = star[k]
+            g = tri.nbr[f][tri.tri[f].index(v)]
+            if (g >= 0 and any(x in moved for x in tri.tri[g])) or edge_key(ring[k], ring[(k + 1) % n]) in changed:
+                affected[rec.link_edge[k]] = True
+        pos = self._positions(rec.inside, inside)
+        known = pos >= 0
+        old_tri = np.where(known, rec.triangle[np.maximum(pos, 0)], 0)
+        fixed = known & ~changed_tri[old_tri]
+        fixed_edge = np.where(fixed, rec.edge[np.maximum(pos, 0)], -1)
+        # The move re-sorted the points of its faces: an edge whose points
+        # now come in another order sums them in another order. Scored again.
+        rows = np.flatnonzero(fixed)
+        order = rows[np.argsort(fixed_edge[rows], kind="stable")]
+        e, p = fixed_edge[order], pos[order]
+        affected[e[1:][(e[1:] == e[:-1]) & (p[1:] < p[:-1])]] = True
+        take = ~fixed | affected[np.maximum(fixed_edge, 0)]
+        take_out = affected[rec.link_edge][outside_link]
+        region = (ring, star, inside[take], outside[take_out], outside_link[take_out], before)
+        job = (plan, tris, region, None, fixed_edge[take])
+        return job, (rec, affected, changed_tri, inside, pos, fixed, take)
+
+    def finish_partial(self, pending, cand: CandidateStencil, scored: CandidateCost) -> tuple[LinkRecord, float]:
+        """The record and cost increase of a collapse scored by :meth:`partial_job`."""
+        rec, affected, changed_tri, inside, pos, fixed, take = pending
+        edge_cost = rec.edge_cost.copy()
+        edge_cost[affected] = scored.edge_cost[affected]
+        p = np.maximum(pos, 0)
+        triangle = np.where(fixed, rec.triangle[p], -1).astype(np.int16)
+        edge = np.where(fixed, rec.edge[p], -1).astype(np.int16)
+        located = np.flatnonzero(take & ~fixed)
+        sub = (np.cumsum(take) - 1)[located]
+        triangle[located] = scored.triangle[sub]
+        edge[located] = scored.assignment[sub]
+        if not changed_tri[triangle[located]].all():
+            raise RuntimeError("a point outside the changed triangles was located by a partial update")
+        new = self._record(rec.plan, rec.keys, edge_cost, inside, triangle, edge)
+        return new, new.delta(self._region(rec.plan.source)[5])
+
+    def _positions(self, old: np.ndarray, new: np.ndarray) -> np.ndarray:
+        """Index of each of ``new`` in ``old`` (ids of points), ``-1`` if absent."""
+        if self._slot is None or len(self._slot) != len(self.points):
+            self._slot = np.full(len(self.points), -1, np.int64)
+        slot = self._slot
+        slot[old] = np.arange(len(old))
+        out = slot[new]
+        slot[old] = -1
+        return out
 
     def link_updates(self, items, budget: int = ROW_BUDGET):
         """Re-scores collapses whose link changed: the changed link edges only.
@@ -502,7 +624,7 @@ class TransportPlan:
                 self._region(u)
                 self._plan(u, w)
 
-    def exports(self, sources, targets: dict | None = None, budget: int = ROW_BUDGET):
+    def exports(self, sources, targets: dict | None = None, budget: int = ROW_BUDGET, extra=()):
         """Yields :meth:`export` batches of the half-edges leaving ``sources``.
 
         Candidates are packed into batches of row capacity ``budget`` (a
@@ -513,9 +635,11 @@ class TransportPlan:
         from the cached regions and plans; the export itself is a
         generator, so that the next batch is exported while the kernel
         scores the last. Each batch's ``seq`` says where its candidates
-        stand in source then ring order.
+        stand in source then ring order. ``extra``: more jobs, after those
+        (:meth:`partial_job`).
         """
-        return self._batches((job for v in sources for job in self._collapse_jobs([v], targets)), budget)
+        jobs = [job for v in sources for job in self._collapse_jobs([v], targets)]
+        return self._batches(jobs + list(extra), budget)
 
     def relocation_exports(self, moves, budget: int = ROW_BUDGET):
         """:meth:`exports` for the moves of :meth:`relocation_candidates`."""
@@ -569,7 +693,7 @@ class TransportPlan:
             for w in wanted:
                 plan = self._plan(v, w)
                 if plan is not None:
-                    jobs.append((plan, np.asarray(plan.new_triangles, np.int64), region, None))
+                    jobs.append((plan, np.asarray(plan.new_triangles, np.int64), region, None, None))
         return jobs
 
     def export(self, sources, targets: dict | None = None) -> _Flat:
@@ -645,7 +769,7 @@ class TransportPlan:
             n = len(ring)
             tris = np.array([[v, ring[k], ring[(k + 1) % n]] for k in range(n)], np.int64)
             plan = CollapsePlan(v, v, tuple(ring), tuple(star), (), (), tuple(map(tuple, tris.tolist())))
-            yield plan, tris, self._region(v), position
+            yield plan, tris, self._region(v), position, None
 
     def relocation_candidate(self, v: int, position) -> CandidateStencil | None:
         """The stencil of moving ``v`` to ``position``, or ``None`` if that
@@ -671,7 +795,7 @@ class TransportPlan:
         tri_job = np.repeat(np.arange(nj), n_tri)
         coords = xy[tris]  # (T, 3, 2)
         tri_start = np.concatenate([[0], np.cumsum(n_tri)])
-        for j, (plan, t, _region, moved) in enumerate(jobs):
+        for j, (plan, t, _region, moved, _fixed) in enumerate(jobs):
             if moved is not None:
                 s = slice(tri_start[j], tri_start[j + 1])
                 coords[s] = np.where((t == plan.source)[..., None], moved, coords[s])
@@ -688,7 +812,7 @@ class TransportPlan:
         ukeys = np.stack([(ucode // nv) % nv, ucode % nv], 1)
         tri_edges = np.sort(inv.reshape(-1, 3), 1)
         edge_xy = xy[ukeys]
-        for j, (plan, _t, _region, moved) in enumerate(jobs):
+        for j, (plan, _t, _region, moved, _fixed) in enumerate(jobs):
             if moved is not None:
                 es = slice(edge_start[j], edge_start[j + 1])
                 edge_xy[es] = np.where((ukeys[es] == plan.source)[..., None], moved, edge_xy[es])
@@ -715,6 +839,12 @@ class TransportPlan:
             lk = (out_job * nv + np.minimum(a, b)) * nv + np.maximum(a, b)
             row_cand[out_rows] = np.searchsorted(ucode, lk)[:, None]
             row_locate[out_rows] = False
+        # Rows of the region whose edge is known (partial_job): fixed to it.
+        for j, job in enumerate(jobs):
+            if job[4] is not None:
+                k = np.flatnonzero(job[4] >= 0)
+                row_cand[row_start[j] + k] = (edge_start[j] + job[4][k])[:, None]
+                row_locate[row_start[j] + k] = False
 
         # Fans: the new triangles of a job are its flipped-out ears, then a
         # fan around one apex (the target, or the moved vertex), CCW.
@@ -746,7 +876,7 @@ class TransportPlan:
         elif not few.all():
             self._locate_on_host(flat, np.flatnonzero(~few))
 
-        for j, (plan, _t, _region, moved) in enumerate(jobs):
+        for j, (plan, _t, _region, moved, _fixed) in enumerate(jobs):
             es = slice(edge_start[j], edge_start[j + 1])
             rs = slice(row_start[j], row_start[j + 1])
             cand = tri = None
@@ -1010,13 +1140,16 @@ class TransportPlan:
                         x, y = (u for u in tg if u != a)
                         links.setdefault(a, set()).add(edge_key(x, y))
         dirty = full | set(links)
+        # A move keeps every star's triangles: around its ring vertices, only
+        # the moved vertex is logged (partial_job scores what it reaches).
+        moved = frozenset((plan.source,)) if cand.moved is not None else frozenset()
         if cand.moved is None:
             dirty.discard(plan.source)  # removed by the collapse
         for v in dirty:
             self._region_version[v] += 1
-            if v in links:
+            if v in links or (moved and v != plan.source):
                 log = self._link_log.setdefault(v, [])
-                log.append((self._region_version[v], frozenset(links[v])))
+                log.append((self._region_version[v], frozenset(links.get(v, ())), moved if v in full else frozenset()))
                 if len(log) > _LINK_LOG:
                     self._star_changed_at[v] = log.pop(0)[0]
             else:
