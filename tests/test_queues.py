@@ -336,6 +336,31 @@ def test_batches_fill_the_capacity_of_their_largest_candidate():
 
 
 @settings(max_examples=80, deadline=None)
+@given(sizes=st.lists(st.tuples(st.integers(0, 3000), st.integers(1, 60)), min_size=0, max_size=400),
+       budget=st.sampled_from([4096, 1 << 15]))
+def test_next_fit_packing_keeps_order_within_limits(sizes, budget):
+    """Consecutive runs of the jobs, in order; each within the larger of the
+    budget and its largest job's capacity; each closed only when the next
+    job would not fit it."""
+    from otjax.curves import scoring
+    from otjax.curves.plan import pack_next_fit
+
+    jobs = [(r, 2 * t + 1, t) for r, t in sizes]
+    batches = pack_next_fit(jobs, budget)
+    assert [i for b in batches for i in b] == list(range(len(jobs)))
+    assert all(b for b in batches)
+
+    def fits(b):
+        total = [sum(jobs[i][k] for i in b) for k in range(3)]
+        limit = max(budget, max(scoring.capacity(*jobs[i], 1) for i in b))
+        return scoring.capacity(*total, len(b)) <= limit
+
+    for b, nxt in zip(batches, batches[1:]):
+        assert fits(b) and not fits(b + nxt[:1])
+    assert not batches or fits(batches[-1])
+
+
+@settings(max_examples=80, deadline=None)
 @given(sizes=st.lists(st.tuples(st.integers(1, 70_000), st.integers(1, 60)), min_size=0, max_size=120),
        budget=st.sampled_from([4096, 8192, 1 << 15]))
 def test_first_fit_packing_is_a_partition_within_limits(sizes, budget):

@@ -251,7 +251,9 @@ class _Scores:
         sources = sorted(sources)
         full, updates, partial = sources, [], []
         if self.records is not None and targets is None:
+            t0 = time.perf_counter()
             targets, updates, partial = self._split(sources)
+            self.stats.seconds["export"] += time.perf_counter() - t0
             full = sorted(targets)
         self.partial = {(job[0].source, job[0].target): pending for job, pending in partial}
         exports = self.plan.exports(full, targets, extra=[job for job, _ in partial])

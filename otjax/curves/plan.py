@@ -19,6 +19,7 @@ the greedy order is the same as for W2 itself, and squared costs add.
 
 from __future__ import annotations
 
+import itertools
 from dataclasses import dataclass
 from typing import NamedTuple
 
@@ -43,6 +44,9 @@ ROW_BUDGET = 1 << 15
 # (dispatch, reading results back, ~0.25 ms) over the cost of a row
 # (~0.125 us): 4096 rows 0.76 ms, 8192 rows 1.27 ms, 32768 rows 4.34 ms.
 CALL_ROWS = 1 << 11
+# Jobs of at most 1/SMALL_JOB of the row budget are packed in export order
+# (pack_next_fit): a batch then wastes less than 1/SMALL_JOB of its rows.
+SMALL_JOB = 32
 # Link changes remembered per vertex (see TransportPlan.changed_links); an
 # older record is treated as a change of the star.
 _LINK_LOG = 64
@@ -214,6 +218,30 @@ def pack_first_fit(sizes, budget: int) -> list[list[int]]:
         else:
             bins.append([[i], r, e, t, max(budget, _scoring.capacity(r, e, t, 1))])
     return [sorted(b[0]) for b in bins]
+
+
+def pack_next_fit(sizes, budget: int) -> list[list[int]]:
+    """Groups jobs into kernel batches in their order, each batch closed when
+    the next job does not fit it (limits as in :func:`pack_first_fit`).
+
+    For many small jobs (a parallel round re-scores thousands of
+    candidates of a few dozen rows): a batch then wastes less than one job,
+    and first fit would test every job against every batch.
+    """
+    batches: list[list[int]] = []
+    rows = edges = tris = 0
+    limit = budget
+    for i, (r, e, t) in enumerate(sizes):
+        alone = _scoring.capacity(r, e, t, 1)
+        if batches and _scoring.capacity(rows + r, edges + e, tris + t, len(batches[-1]) + 1) > max(limit, alone):
+            batches.append([])
+            rows = edges = tris = 0
+            limit = budget
+        elif not batches:
+            batches.append([])
+        batches[-1].append(i)
+        rows, edges, tris, limit = rows + r, edges + e, tris + t, max(limit, alone)
+    return batches
 
 
 class TransportPlan:
@@ -638,8 +666,9 @@ class TransportPlan:
         stand in source then ring order. ``extra``: more jobs, after those
         (:meth:`partial_job`).
         """
-        jobs = [job for v in sources for job in self._collapse_jobs([v], targets)]
-        return self._batches(jobs + list(extra), budget)
+        # Lazy: the jobs are listed at the first batch (timed as export).
+        jobs = itertools.chain((job for v in sources for job in self._collapse_jobs([v], targets)), extra)
+        return self._batches(jobs, budget)
 
     def relocation_exports(self, moves, budget: int = ROW_BUDGET):
         """:meth:`exports` for the moves of :meth:`relocation_candidates`."""
@@ -649,12 +678,15 @@ class TransportPlan:
         jobs = list(jobs_iter)
         # Edges of a triangulated disc of t triangles: at most 2 t + 1.
         sizes = [(len(job[2][2]) + len(job[2][3]), 2 * len(job[1]) + 1, len(job[1])) for job in jobs]
-        packing = pack_first_fit(sizes, budget)
+        # Jobs that are small against a batch fill it in any order; first fit
+        # pays for large ones (it is quadratic in the batches).
+        small = not sizes or max(x[0] for x in sizes) <= budget // SMALL_JOB
+        packing = (pack_next_fit if small else pack_first_fit)(sizes, budget)
         # A batch of 4-16k rows pads to the budget's shape (see _shape_for):
         # a few calls of the smallest shape may cost less (and run side by
         # side). The packing with the fewer padded rows (a call counted as
         # CALL_ROWS more) is kept.
-        if budget > _scoring.MIN_ROWS:
+        if _scoring.MIN_ROWS < budget and sum(x[0] for x in sizes) <= 2 * budget:
             other = pack_first_fit(sizes, _scoring.MIN_ROWS)
             if self._padded_rows(other, sizes) < self._padded_rows(packing, sizes):
                 packing = other
