@@ -215,7 +215,6 @@ class _Scores:
             for w in tri.star(v)[0]:
                 rec = recs.get(w)
                 changes = None if rec is None else plan.record_changes(rec)
-                part = None
                 if changes is not None and changes[1]:
                     part = plan.partial_job(rec, *changes)
                     if part is not None:
