@@ -182,6 +182,11 @@ def segment_sqdist_np(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray
                     np.where(np.sum(pb * d, -1) >= 0, np.sum(pb * pb, -1), interior))
 
 
+def _triangle_edges(tris: np.ndarray) -> np.ndarray:
+    """``(T, 3, 2)`` the edges of triangles ``(T, 3)``, each as ``(min, max)`` id."""
+    return np.sort(np.stack([tris, tris[:, [1, 2, 0]]], -1), -1)
+
+
 def pack_first_fit(sizes, budget: int) -> list[list[int]]:
     """Groups jobs into kernel batches, first fit by decreasing rows.
 
@@ -229,16 +234,13 @@ def pack_next_fit(sizes, budget: int) -> list[list[int]]:
     and first fit would test every job against every batch.
     """
     batches: list[list[int]] = []
-    rows = edges = tris = 0
-    limit = budget
+    rows = edges = tris = limit = 0
     for i, (r, e, t) in enumerate(sizes):
         alone = _scoring.capacity(r, e, t, 1)
-        if batches and _scoring.capacity(rows + r, edges + e, tris + t, len(batches[-1]) + 1) > max(limit, alone):
+        if not batches or _scoring.capacity(rows + r, edges + e, tris + t, len(batches[-1]) + 1) > max(limit, alone):
             batches.append([])
             rows = edges = tris = 0
             limit = budget
-        elif not batches:
-            batches.append([])
         batches[-1].append(i)
         rows, edges, tris, limit = rows + r, edges + e, tris + t, max(limit, alone)
     return batches
@@ -518,7 +520,7 @@ class TransportPlan:
             return None
         nv = len(tri.xy)
         code = rec.keys[:, 0] * nv + rec.keys[:, 1]
-        e = np.sort(np.stack([tris, tris[:, [1, 2, 0]]], -1), -1)[changed_tri].reshape(-1, 2)
+        e = _triangle_edges(tris[changed_tri]).reshape(-1, 2)
         affected = np.zeros(len(code), bool)
         affected[np.searchsorted(code, e[:, 0] * nv + e[:, 1])] = True
         n = len(ring)
@@ -836,7 +838,7 @@ class TransportPlan:
         # Local edges: keys coded job-major, so np.unique numbers every job's
         # edges contiguously and in increasing key order within the job:
         # the flat number of an edge is its job's offset plus its local one.
-        e = np.sort(np.stack([tris, tris[:, [1, 2, 0]]], -1), -1)  # (T, 3, 2)
+        e = _triangle_edges(tris)  # (T, 3, 2)
         code = (np.repeat(tri_job, 3) * nv + e[..., 0].ravel()) * nv + e[..., 1].ravel()
         ucode, inv = np.unique(code, return_inverse=True)
         edge_job = ucode // (nv * nv)
