@@ -12,7 +12,7 @@ import numbers
 
 import numpy as np
 
-from otjax.curves.predicates import orient
+from otjax.predicates import orient
 
 # A wrong type is a ValueError too, not a TypeError (the noqa: TRY004 below): DESIGN.md
 # promises one exception type for bad input, which is what the CLI catches.
@@ -212,3 +212,24 @@ def check_count(name: str, value, minimum: int = 0) -> int:
     if value < minimum:
         raise ValueError(f"{name} must be >= {minimum}, got {value}")
     return int(value)
+
+
+def check_number(name: str, value, *, minimum: float = 0.0, integer: bool = False, allow_none: bool = False):
+    """A finite number (or integer) ``>= minimum``, as a Python float (int);
+    ``None`` passes through when ``allow_none``.
+
+    Bad input is a ``ValueError`` everywhere in otjax, types included.
+
+    Example:
+      >>> check_number("choices", 15, minimum=1, integer=True)
+      15
+    """
+    if value is None and allow_none:
+        return None
+    kind = numbers.Integral if integer else numbers.Real
+    if isinstance(value, bool) or not isinstance(value, kind):
+        what = "an integer" if integer else "a number"
+        raise ValueError(f"{name} must be {what}, got {value!r}")  # noqa: TRY004
+    if not np.isfinite(value) or value < minimum:
+        raise ValueError(f"{name} must be finite and >= {minimum}, got {value!r}")
+    return int(value) if integer else float(value)

@@ -12,15 +12,17 @@ Topology (Python, exact predicates):
 - :class:`CollapsePlan`, :func:`edge_key` -- a planned collapse; canonical
   ``(min, max)`` edge keys.
 
-Transport plan (Python bookkeeping around the JAX kernel):
+Transport plan and engine (Python bookkeeping around the JAX kernel):
 
-- :class:`TransportPlan` -- points located in triangles, assigned to edges,
-  cached per-edge costs; exports candidate stencils
-  (:meth:`TransportPlan.candidates`), scores them in batches
-  (:meth:`TransportPlan.score`) and applies them (:meth:`TransportPlan.apply`);
-  the decimation loop's fast path exports flat batches
-  (:meth:`TransportPlan.exports`) located and scored by one fused kernel
-  (:meth:`TransportPlan.score_batches`, :mod:`otjax.curves.scoring`).
+- :class:`TransportPlan` -- the plan's state: points located in triangles,
+  assigned to edges, per-edge costs; :meth:`TransportPlan.apply` returns a
+  :class:`Change`.
+- :class:`CurveEngine` -- a plan and what scores and applies its changes:
+  exports candidate stencils (:meth:`CurveEngine.candidates`), scores them in
+  batches (:meth:`CurveEngine.score_candidates`) and applies them
+  (:meth:`CurveEngine.apply`); the decimation loop's fast path exports flat
+  batches (:meth:`CurveEngine.exports`) located and scored by one fused
+  kernel (:meth:`CurveEngine.score_batches`, :mod:`otjax.curves.scoring`).
 - :class:`CandidateStencil`, :class:`CandidateCost` -- one exported candidate
   and its scored outcome.
 
@@ -41,21 +43,27 @@ JAX kernels (pure functions of arrays):
 Drivers:
 
 - :func:`decimate`, :class:`DecimationStats`, :func:`within_tolerance`,
-  :data:`QUEUES` -- the greedy collapse loop and its queue kinds.
-- :func:`optimal_position`, :func:`relocate` -- closed-form relocation
-  (paper §3.3); :func:`refine`, :func:`minimize_lbfgs` -- L-BFGS refinement
-  on the fixed-assignment cost.
+  :data:`QUEUES` -- the greedy collapse loop (:mod:`otjax.decimation`) over a
+  curve engine, and its queue kinds.
+- :func:`optimal_position` -- closed-form relocation (paper §3.3), applied by
+  :meth:`CurveEngine.relocate`; :func:`refine`, :func:`minimize_lbfgs` --
+  L-BFGS refinement on the fixed-assignment cost.
 - :func:`reconstruct_curve`, :class:`CurveResult` -- the pipeline and its
   result (also at the top level, ``otjax.reconstruct_curve``);
   :func:`default_initial_vertices` -- its default initial subset size.
 
+Scoring runs in JAX's float64 mode (exact point location): research code
+calls these inside ``jax.enable_x64(True)`` (``reconstruct_curve`` does it
+itself).
+
 Example:
-  >>> import numpy as np
+  >>> import jax, numpy as np
   >>> from otjax import curves
   >>> p = np.random.default_rng(0).random((40, 2))
-  >>> plan = curves.TransportPlan(curves.Triangulation(p), p, np.ones(40))
-  >>> cands = plan.candidates(range(len(p)))
-  >>> delta, _ = plan.score(cands)
+  >>> with jax.enable_x64(True):
+  ...     engine = curves.CurveEngine(curves.Triangulation(p), p, np.ones(40))
+  ...     cands = engine.candidates(range(len(p)))
+  ...     delta, _ = engine.score_candidates(cands)
   >>> len(delta) == len(cands) > 0
   True
 """
@@ -71,11 +79,14 @@ from otjax.curves.cost import (
     stencil_cost,
 )
 from otjax.curves.decimate import QUEUES, DecimationStats, decimate, within_tolerance
-from otjax.curves.plan import CandidateCost, CandidateStencil, TransportPlan
+from otjax.curves.engine import CurveEngine, Scored
+from otjax.curves.plan import Change, TransportPlan
 from otjax.curves.reconstruct import default_initial_vertices, reconstruct_curve
-from otjax.curves.relocation import minimize_lbfgs, optimal_position, refine, relocate
+from otjax.curves.refinement import minimize_lbfgs, refine
+from otjax.curves.relocation import optimal_position
 from otjax.curves.result import CurveResult
-from otjax.curves.triangulation import CollapsePlan, Triangulation, edge_key
+from otjax.curves.stencils import CandidateCost, CandidateStencil
+from otjax.curves.triangulation import CollapsePlan, MovePlan, Triangulation, edge_key
 from otjax.stencil import Buckets, EdgeStencil, pack_edge_stencils
 
 __all__ = [
@@ -83,10 +94,14 @@ __all__ = [
     "Buckets",
     "CandidateCost",
     "CandidateStencil",
+    "Change",
     "CollapsePlan",
+    "CurveEngine",
     "CurveResult",
     "DecimationStats",
     "EdgeStencil",
+    "MovePlan",
+    "Scored",
     "StencilCost",
     "TransportPlan",
     "Triangulation",
@@ -103,7 +118,6 @@ __all__ = [
     "pack_edge_stencils",
     "reconstruct_curve",
     "refine",
-    "relocate",
     "segment_sqdist",
     "stencil_cost",
     "within_tolerance",

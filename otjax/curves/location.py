@@ -7,7 +7,7 @@ run's exhaustive end). :func:`in_triangle_filtered` evaluates the same
 orientation determinants in JAX, with Shewchuk's forward error bound, and
 answers "inside", "outside" or "unsure"; :func:`locate_pairs` settles the
 unsure pairs with the exact host predicate
-(:func:`otjax.curves.predicates.in_triangle_perturbed`). Its answers are
+(:func:`otjax.predicates.in_triangle_perturbed`). Its answers are
 therefore exactly the host predicate's, pair for pair.
 
 Why the filter is sound even if XLA fuses a multiply-add: the bound covers the
@@ -23,7 +23,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from otjax.curves.predicates import _ORIENT_ERR, in_triangle_perturbed
+from otjax.batch.pipeline import require_x64
+from otjax.predicates import ORIENT_ERR, in_triangle_perturbed
 
 INSIDE, OUTSIDE, UNSURE = 1, 0, -1
 # Pairs per kernel call: one size, one compiled shape. A chunk costs ~0.25 ms;
@@ -48,7 +49,7 @@ def _orient_perturbed_filtered(ax, ay, bx, by, px, py) -> tuple[jax.Array, jax.A
     left = (bx - ax) * (py - ay)
     right = (by - ay) * (px - ax)
     det = left - right
-    sure = jnp.abs(det) > _ORIENT_ERR * (jnp.abs(left) + jnp.abs(right))
+    sure = jnp.abs(det) > ORIENT_ERR * (jnp.abs(left) + jnp.abs(right))
     # Both products exactly zero (an exactly-zero factor each), or p == b:
     # det is 0 and the perturbation decides, by exact comparisons, as on the
     # host: the sign of a_y - b_y, else of b_x - a_x.
@@ -101,7 +102,7 @@ def _padding(size: int) -> tuple[np.ndarray, np.ndarray]:
 def locate_pairs(tri: np.ndarray, p: np.ndarray) -> np.ndarray:
     """Exact perturbed point-in-triangle test for many pairs.
 
-    Same answers as :func:`otjax.curves.predicates.in_triangle_perturbed`,
+    Same answers as :func:`otjax.predicates.in_triangle_perturbed`,
     computed by the filtered kernel in fixed-size chunks; the unsure pairs
     (a handful on noisy data, more on exactly collinear data) go to the exact
     host predicate.
@@ -122,18 +123,18 @@ def locate_pairs(tri: np.ndarray, p: np.ndarray) -> np.ndarray:
     if n < MIN_PAIRS:
         return exact(np.arange(n))
     out = np.empty(n, np.int8)
-    with jax.enable_x64(True):
-        pending = []
-        for s in range(0, n, CHUNK):
-            t, q = tri[:, s:s + CHUNK], p[:, s:s + CHUNK]
-            if q.shape[1] < CHUNK:
-                pad_t, pad_q = _padding(CHUNK)
-                t = np.concatenate([t, pad_t[:, q.shape[1]:]], 1)
-                q = np.concatenate([q, pad_q[:, q.shape[1]:]], 1)
-            pending.append((s, in_triangle_filtered(t, q)))  # dispatched asynchronously
-        for s, res in pending:
-            res = np.asarray(res)
-            out[s:s + len(res)] = res[: n - s]
+    require_x64("exact point location")
+    pending = []
+    for s in range(0, n, CHUNK):
+        t, q = tri[:, s:s + CHUNK], p[:, s:s + CHUNK]
+        if q.shape[1] < CHUNK:
+            pad_t, pad_q = _padding(CHUNK)
+            t = np.concatenate([t, pad_t[:, q.shape[1]:]], 1)
+            q = np.concatenate([q, pad_q[:, q.shape[1]:]], 1)
+        pending.append((s, in_triangle_filtered(t, q)))  # dispatched asynchronously
+    for s, res in pending:
+        res = np.asarray(res)
+        out[s:s + len(res)] = res[: n - s]
     hold = out == INSIDE
     unsure = np.flatnonzero(out == UNSURE)
     if len(unsure):

@@ -10,29 +10,18 @@ passes -> optional gradient refinement -> edge filtering by relevance ->
 from __future__ import annotations
 
 import time
+from typing import NamedTuple
 
+import jax
 import numpy as np
 
-from otjax.curves.decimate import QUEUES, decimate, within_tolerance
+from otjax.curves.decimate import QUEUES, DecimationStats, decimate, within_tolerance
+from otjax.curves.engine import CurveEngine
 from otjax.curves.plan import TransportPlan
-from otjax.curves.relocation import refine as refine_plan
-from otjax.curves.relocation import relocate
+from otjax.curves.refinement import refine as refine_positions
 from otjax.curves.result import CurveResult
 from otjax.curves.triangulation import Triangulation
-from otjax.validation import check_points, check_target
-
-
-def _check_number(name: str, value, *, minimum: float = 0.0, integer: bool = False, allow_none=False):
-    if value is None and allow_none:
-        return None
-    kind = (int, np.integer) if integer else (int, float, np.integer, np.floating)
-    if isinstance(value, bool) or not isinstance(value, kind):
-        what = "an integer" if integer else "a number"
-        # Bad input is a ValueError everywhere in otjax (DESIGN.md), types included.
-        raise ValueError(f"{name} must be {what}, got {value!r}")  # noqa: TRY004
-    if not np.isfinite(value) or value < minimum:
-        raise ValueError(f"{name} must be finite and >= {minimum}, got {value!r}")
-    return int(value) if integer else float(value)
+from otjax.validation import check_number, check_points, check_target
 
 
 def reconstruct_curve(points, masses=None, n_vertices: int | None = None, *,
@@ -104,25 +93,25 @@ def reconstruct_curve(points, masses=None, n_vertices: int | None = None, *,
     if n_vertices is not None:
         check_target(n_vertices, len(points), minimum=1)
         n_vertices = int(n_vertices)
-    tolerance = _check_number("tolerance", tolerance, allow_none=True)
+    tolerance = check_number("tolerance", tolerance, allow_none=True)
     if tolerance is not None and tolerance <= 0:
         raise ValueError(f"tolerance must be > 0, got {tolerance}")
-    relevance = _check_number("relevance", relevance)
-    density = _check_number("density", density)
+    relevance = check_number("relevance", relevance)
+    density = check_number("density", density)
     if density > 1:
         raise ValueError(f"density must be in [0, 1], got {density}")
-    relocation = _check_number("relocation", relocation, integer=True)
-    final_relocations = _check_number("final_relocations", final_relocations, integer=True)
-    seed = _check_number("seed", seed, integer=True)
+    relocation = check_number("relocation", relocation, integer=True)
+    final_relocations = check_number("final_relocations", final_relocations, integer=True)
+    seed = check_number("seed", seed, integer=True)
     if queue not in QUEUES:
         raise ValueError(f"queue must be one of {', '.join(QUEUES)}, got {queue!r}")
-    choices = _check_number("choices", choices, minimum=1, integer=True)
-    round_fraction = _check_number("round_fraction", round_fraction)
+    choices = check_number("choices", choices, minimum=1, integer=True)
+    round_fraction = check_number("round_fraction", round_fraction)
     if not 0 < round_fraction <= 1:
         raise ValueError(f"round_fraction must be in (0, 1], got {round_fraction}")
     if initial_vertices is None:
         initial_vertices = default_initial_vertices(len(points), n_vertices)
-    initial_vertices = _check_number("initial_vertices", initial_vertices, minimum=1, integer=True)
+    initial_vertices = check_number("initial_vertices", initial_vertices, minimum=1, integer=True)
     if n_vertices is not None and initial_vertices < n_vertices:
         raise ValueError(f"initial_vertices ({initial_vertices}) must be >= n_vertices ({n_vertices})")
     initial_vertices = min(initial_vertices, len(points))
@@ -132,6 +121,33 @@ def reconstruct_curve(points, masses=None, n_vertices: int | None = None, *,
               "initial_vertices": initial_vertices,
               "seed": seed, "merge_duplicates": bool(merge_duplicates), "n_points": len(points)}
 
+    # Point location is exact float64 arithmetic: the whole run is in JAX's
+    # x64 mode, entered here, at the boundary, for its duration only.
+    with jax.enable_x64(True):
+        run = _run(points, masses, params, progress)
+    stats = run.stats
+    result = result_from_plan(run.engine.plan, relevance, params, time.perf_counter() - t_start, density)
+    result.history = {"collapses": stats.collapses, "relocations": run.relocations, "scored": stats.scored,
+                      "updated": stats.updated, "kernel_calls": stats.kernel_calls, "seconds": run.seconds,
+                      "rounds": stats.rounds, "switched_at": stats.switched_at,
+                      "compiled_shapes": run.engine.compiled_shapes,
+                      "refine": run.refined}
+    return result
+
+
+class _Outcome(NamedTuple):
+    engine: CurveEngine
+    stats: DecimationStats
+    seconds: dict
+    relocations: int
+    refined: dict | None
+
+
+def _run(points, masses, params: dict, progress: bool) -> _Outcome:
+    """The pipeline's steps on validated input (``params``): initial
+    triangulation, decimation, final relocation passes, refinement."""
+    n_vertices, tolerance, seed = params["n_vertices"], params["tolerance"], params["seed"]
+    initial_vertices = params["initial_vertices"]
     timings = {}
     t0 = time.perf_counter()
     rng = np.random.default_rng(seed)
@@ -140,34 +156,31 @@ def reconstruct_curve(points, masses=None, n_vertices: int | None = None, *,
         vertices = points[subset]
     else:
         vertices = points
-    plan = TransportPlan(Triangulation(vertices), points, masses)
+    engine = CurveEngine(Triangulation(vertices), points, masses)
     timings["init"] = time.perf_counter() - t0
-    stats = decimate(plan, n_vertices, tolerance=tolerance, relocation=relocation, queue=queue,
-                     choices=choices, round_fraction=round_fraction, seed=int(rng.integers(2**63)),
-                     progress=progress)
+    stats = decimate(engine, n_vertices, tolerance=tolerance, relocation=params["relocation"],
+                     queue=params["queue"], choices=params["choices"], round_fraction=params["round_fraction"],
+                     seed=int(rng.integers(2**63)), progress=progress)
     timings.update(stats.seconds)
     t0 = time.perf_counter()
-    admissible = within_tolerance(tolerance) if tolerance is not None else None
+    veto = within_tolerance(tolerance) if tolerance is not None else None
     moved = stats.relocations
-    for _ in range(final_relocations):
-        live = np.nonzero(plan.tri.alive & ~plan.tri.pinned)[0]
-        _, m = relocate(plan, live.tolist(), admissible)
+    for _ in range(params["final_relocations"]):
+        _, m = engine.relocate(engine.live_sources(), veto)
         moved += m
         if m == 0:
             break
     timings["final_relocation"] = time.perf_counter() - t0
+    stats.kernel_calls = engine.scorer.calls
     refined = None
-    if refine:
+    if params["refine"]:
         t0 = time.perf_counter()
-        plan, refined = refine_plan(plan)
+        before = engine
+        engine, refined = refine_positions(engine)
+        if engine is not before:
+            stats.kernel_calls += engine.scorer.calls
         timings["refine"] = time.perf_counter() - t0
-    result = result_from_plan(plan, relevance, params, time.perf_counter() - t_start, density)
-    result.history = {"collapses": stats.collapses, "relocations": moved, "scored": stats.scored,
-                      "updated": stats.updated, "kernel_calls": plan.n_kernel_calls, "seconds": timings,
-                      "rounds": stats.rounds, "switched_at": stats.switched_at,
-                      "compiled_shapes": plan.compiled_shapes,
-                      "refine": refined}
-    return result
+    return _Outcome(engine, stats, timings, moved, refined)
 
 
 def default_initial_vertices(n_points: int, n_vertices: int | None) -> int:

@@ -36,6 +36,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from otjax.batch.fields import Field, FieldSpec
 from otjax.curves.cost import stencil_cost
 from otjax.curves.location import INSIDE, in_triangle_rows
 from otjax.stencil import EdgeStencil
@@ -131,53 +132,46 @@ def capacity(rows: int, edges: int, triangles: int, jobs: int) -> int:
     return r
 
 
-def _field_shapes(r: int) -> dict[str, tuple[int, ...]]:
-    """Shape of every :class:`FlatBatch` field at row capacity ``r``."""
-    e = t = r // EDGES_PER_ROW
-    j = r // JOBS_PER_ROW
-    return {
-        "row_xy": (r, 2), "row_mass": (r,), "row_job": (r,), "row_cand": (r, 3), "row_locate": (r,),
-        "row_valid": (r,), "tri_xy": (6, t), "tri_edges": (t, 3), "fan_key": (t,), "fan_tri": (t,),
-        "job_fan": (j + 1,), "job_apex": (j, 2), "job_theta": (j,), "job_ears": (j, MAX_EARS),
-        "edge_xy": (e, 2, 2), "edge_valid": (e,), "edge_job": (e,),
-    }
+def _pad_job(r: int) -> int:
+    return r // JOBS_PER_ROW - 1
 
 
-_FLOAT_FIELDS = ("row_xy", "row_mass", "tri_xy", "fan_key", "job_apex", "job_theta", "edge_xy")
-_BOOL_FIELDS = ("row_locate", "row_valid", "edge_valid")
+def _e(r: int) -> int:
+    return r // EDGES_PER_ROW
 
 
-@functools.cache
-def layout(r: int) -> dict[str, tuple]:
-    """Where each field lives in the two buffers of a packed batch.
+def _j(r: int) -> int:
+    return r // JOBS_PER_ROW
 
-    A batch travels as one float64 and one int32 buffer (booleans as 0/1)
-    rather than seventeen arrays: each array passed to a jitted call costs a
-    transfer and its bookkeeping (~20 us on CPU, measured), a third of a
-    small call.
 
-    Returns:
-      ``{field: (is_float, offset, shape)}``, and ``"_sizes"``: the lengths
-      of the two buffers.
-    """
-    out, offsets = {}, {True: 0, False: 0}
-    for name, shape in _field_shapes(r).items():
-        is_float = name in _FLOAT_FIELDS
-        out[name] = (is_float, offsets[is_float], shape)
-        offsets[is_float] += int(np.prod(shape))
-    out["_sizes"] = (offsets[True], offsets[False])
-    return out
+# The layout of a packed :class:`FlatBatch`, written once: field order, dtype
+# kind, shape at row capacity ``r``, pad value (padding rows and edges belong
+# to the last job, which no batch uses), and the axis a batch fills.
+FIELDS = FieldSpec([
+    Field("row_xy", "float", lambda r: (r, 2)),
+    Field("row_mass", "float", lambda r: (r,)),
+    Field("row_job", "int", lambda r: (r,), pad=_pad_job),
+    Field("row_cand", "int", lambda r: (r, 3)),
+    Field("row_locate", "bool", lambda r: (r,)),
+    Field("row_valid", "bool", lambda r: (r,)),
+    Field("tri_xy", "float", lambda r: (6, _e(r)), axis=1),
+    Field("tri_edges", "int", lambda r: (_e(r), 3)),
+    Field("fan_key", "float", lambda r: (_e(r),), pad=np.inf),
+    Field("fan_tri", "int", lambda r: (_e(r),)),
+    Field("job_fan", "int", lambda r: (_j(r) + 1,)),
+    Field("job_apex", "float", lambda r: (_j(r), 2)),
+    Field("job_theta", "float", lambda r: (_j(r),)),
+    Field("job_ears", "int", lambda r: (_j(r), MAX_EARS), pad=-1),
+    Field("edge_xy", "float", lambda r: (_e(r), 2, 2)),
+    Field("edge_valid", "bool", lambda r: (_e(r),)),
+    Field("edge_job", "int", lambda r: (_e(r),), pad=_pad_job),
+])
+assert tuple(f.name for f in FIELDS.fields) == FlatBatch._fields
 
 
 def unpack(floats, ints, r: int) -> FlatBatch:
-    """The :class:`FlatBatch` views of a packed batch (NumPy or JAX arrays)."""
-    fields = {}
-    for name, shape in _field_shapes(r).items():
-        is_float, offset, shape = layout(r)[name]
-        buf = floats if is_float else ints
-        x = buf[offset: offset + int(np.prod(shape))].reshape(shape)
-        fields[name] = x != 0 if name in _BOOL_FIELDS else x
-    return FlatBatch(**fields)
+    """The :class:`FlatBatch` views of a batch packed by :data:`FIELDS` at capacity ``r``."""
+    return FlatBatch(**FIELDS.unpack(floats, ints, r))
 
 
 def pseudo_angle(dx, dy, xp=np):
@@ -286,5 +280,5 @@ def score_flat(batch: FlatBatch, dtype=jnp.float64, retry_per_row: int = RETRY_P
 
 @functools.partial(jax.jit, static_argnames=("rows", "dtype"))
 def score_packed(floats: jax.Array, ints: jax.Array, rows: int, dtype=jnp.float64):
-    """:func:`score_flat` of the batch packed by :func:`layout` at capacity ``rows``."""
+    """:func:`score_flat` of the batch packed by :data:`FIELDS` at capacity ``rows``."""
     return score_flat.__wrapped__(unpack(floats, ints, rows), dtype)

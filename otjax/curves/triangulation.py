@@ -8,7 +8,7 @@ has a closed one-ring. Triangle and vertex slots are never reused: a collapse
 frees two triangles, a flip rewrites two in place.
 
 All geometric decisions use the exact predicates of
-:mod:`otjax.curves.predicates`. Collapses follow de Goes et al. 2011, §3.2: the
+:mod:`otjax.predicates`. Collapses follow de Goes et al. 2011, §3.2: the
 link condition, the kernel test, and the flip procedure that makes every
 half-edge collapsible (:meth:`Triangulation.plan_collapse`).
 """
@@ -20,7 +20,7 @@ from typing import NamedTuple
 import numpy as np
 from scipy.spatial import Delaunay
 
-from otjax.curves.predicates import in_triangle_perturbed, orient, orient_scalar
+from otjax.predicates import in_triangle_perturbed, orient, orient_scalar
 
 N_CORNERS = 4
 
@@ -51,6 +51,43 @@ class CollapsePlan(NamedTuple):
     def new_triangles(self) -> tuple[tuple[int, int, int], ...]:
         """All triangles covering the changed region after the collapse."""
         return self.flipped_out + self.fan
+
+
+class MovePlan(NamedTuple):
+    """What moving ``vertex`` does to the triangulation: its star keeps its
+    triangles (``new_triangles``, the fan ``(vertex, ring[k], ring[k+1])``),
+    which change shape.
+
+    Attributes:
+      vertex: the moved vertex.
+      ring: its CCW one-ring.
+      star: its triangle ids (``star[k]`` is ``(vertex, ring[k], ring[k+1])``).
+    """
+
+    vertex: int
+    ring: tuple[int, ...]
+    star: tuple[int, ...]
+
+    @property
+    def source(self) -> int:
+        """The moved vertex (the name a collapse plan gives its changed vertex)."""
+        return self.vertex
+
+    @property
+    def target(self) -> int:
+        """The moved vertex: a move keeps it."""
+        return self.vertex
+
+    @property
+    def flipped_out(self) -> tuple:
+        """No ears: a move flips nothing."""
+        return ()
+
+    @property
+    def new_triangles(self) -> tuple[tuple[int, int, int], ...]:
+        """The star's triangles, ``(vertex, ring[k], ring[k+1])``, CCW."""
+        n = len(self.ring)
+        return tuple((self.vertex, self.ring[k], self.ring[(k + 1) % n]) for k in range(n))
 
 
 def edge_key(u: int, v: int) -> tuple[int, int]:
@@ -422,7 +459,7 @@ class Triangulation:
         """Flips the edge opposite ``tri[f][k]``; returns the two triangle ids.
 
         The caller guarantees the quadrilateral is strictly convex (checked
-        with :func:`otjax.curves.predicates.orient`; a non-convex flip raises).
+        with :func:`otjax.predicates.orient`; a non-convex flip raises).
         """
         g = self.nbr[f][k]
         if g < 0:

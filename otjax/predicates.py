@@ -21,7 +21,7 @@ import numpy as np
 # Shewchuk's bound for the 2x2 orientation determinant (Adaptive Precision
 # Floating-Point Arithmetic, 1997): |det - fl(det)| <= ERR * (|l| + |r|).
 _EPS = np.finfo(np.float64).eps / 2
-_ORIENT_ERR = (3.0 + 16.0 * _EPS) * _EPS
+ORIENT_ERR = (3.0 + 16.0 * _EPS) * _EPS
 
 
 def _exact_orient(ax, ay, bx, by, cx, cy) -> int:
@@ -45,7 +45,7 @@ def orient_scalar(ax: float, ay: float, bx: float, by: float, cx: float, cy: flo
     left = (bx - ax) * (cy - ay)
     right = (by - ay) * (cx - ax)
     det = left - right
-    if abs(det) > _ORIENT_ERR * (abs(left) + abs(right)):
+    if abs(det) > ORIENT_ERR * (abs(left) + abs(right)):
         return 1 if det > 0 else -1
     if (cx == bx and cy == by) or ((bx == ax or cy == ay) and (by == ay or cx == ax)):
         return 0
@@ -69,7 +69,7 @@ def orient(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
     left = (b[..., 0] - a[..., 0]) * (c[..., 1] - a[..., 1])
     right = (b[..., 1] - a[..., 1]) * (c[..., 0] - a[..., 0])
     det = left - right
-    bound = _ORIENT_ERR * (np.abs(left) + np.abs(right))
+    bound = ORIENT_ERR * (np.abs(left) + np.abs(right))
     sign = np.sign(det).astype(np.int8)
     # A product with an exactly-zero factor is exactly zero (float subtraction
     # of two doubles is zero only when they are equal), so the common case of

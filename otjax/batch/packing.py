@@ -1,0 +1,125 @@
+"""Grouping variable-size jobs into kernel batches of a few capacities.
+
+A job's size is a tuple of extents, rows first (``(rows, edges,
+triangles)`` for the curve kernel); a kernel's ``capacity(*totals, n_jobs)``
+maps the totals of a batch to the row capacity that fits them. A kernel's
+cost is its batch's capacity (padding rows cost about as much as real
+ones), so batches should fill their capacity and their shapes be few.
+"""
+
+from __future__ import annotations
+
+from typing import Callable
+
+# Jobs of at most 1/SMALL_JOB of the row budget are packed in order (next
+# fit): a batch then wastes less than 1/SMALL_JOB of its rows
+# (docs/decisions.md#small_job).
+SMALL_JOB = 32
+# One more kernel call, counted in padded rows (docs/decisions.md#call_rows).
+CALL_ROWS = 1 << 11
+
+
+class _Bin:
+    __slots__ = ("members", "totals", "limit")
+
+    def __init__(self, members, totals, limit):
+        self.members = members
+        self.totals = totals
+        self.limit = limit
+
+
+def pack_first_fit(sizes, budget: int, capacity: Callable[..., int]) -> list[list[int]]:
+    """Batches by first fit, jobs taken by decreasing rows.
+
+    Args:
+      sizes: ``(rows, ...)`` extents of each job.
+      budget: row capacity of a batch; a job that needs more opens a batch
+        of its own capacity, which smaller jobs then fill.
+      capacity: ``capacity(*totals, n_jobs) -> rows`` of the kernel.
+
+    Returns:
+      Batches as lists of job indices, each increasing; every job in exactly
+      one. A batch holds jobs while the capacity of its totals stays within
+      its limit (the larger of ``budget`` and its first job's own capacity);
+      a job goes to the first batch with room.
+
+    Example:
+      >>> pack_first_fit([(3,), (5,), (2,)], 6, lambda rows, n: rows)
+      [[1], [0, 2]]
+    """
+    order = sorted(range(len(sizes)), key=lambda i: -sizes[i][0])
+    bins: list[_Bin] = []
+    for i in order:
+        s = sizes[i]
+        r = s[0]
+        for b in bins:
+            # Rows bind first: skip the capacity call for batches without room.
+            if b.totals[0] + r <= b.limit:
+                totals = [x + y for x, y in zip(b.totals, s)]
+                if capacity(*totals, len(b.members) + 1) <= b.limit:
+                    b.members.append(i)
+                    b.totals = totals
+                    break
+        else:
+            bins.append(_Bin([i], list(s), max(budget, capacity(*s, 1))))
+    return [sorted(b.members) for b in bins]
+
+
+def pack_next_fit(sizes, budget: int, capacity: Callable[..., int]) -> list[list[int]]:
+    """Batches in job order, each closed when the next job does not fit it
+    (limits as in :func:`pack_first_fit`).
+
+    For many small jobs: a batch then wastes less than one job, where first
+    fit would test every job against every batch.
+
+    Example:
+      >>> pack_next_fit([(3,), (5,), (2,)], 6, lambda rows, n: rows)
+      [[0], [1], [2]]
+    """
+    batches: list[list[int]] = []
+    totals: list[int] = []
+    limit = 0
+    for i, s in enumerate(sizes):
+        alone = capacity(*s, 1)
+        if not batches or capacity(*(x + y for x, y in zip(totals, s)), len(batches[-1]) + 1) > max(limit, alone):
+            batches.append([])
+            totals = [0] * len(s)
+            limit = budget
+        batches[-1].append(i)
+        totals = [x + y for x, y in zip(totals, s)]
+        limit = max(limit, alone)
+    return batches
+
+
+def padded_rows(packing, sizes, capacity: Callable[..., int], shape_for: Callable[[int], int],
+                call_rows: int = CALL_ROWS) -> int:
+    """Rows the kernel calls of ``packing`` pad to, plus ``call_rows`` per call."""
+    total = 0
+    for members in packing:
+        totals = [sum(sizes[i][k] for i in members) for k in range(len(sizes[members[0]]))]
+        total += shape_for(capacity(*totals, len(members))) + call_rows
+    return total
+
+
+def choose_packing(sizes, budget: int, capacity: Callable[..., int], shape_for: Callable[[int], int],
+                   min_rows: int) -> list[list[int]]:
+    """The packing of ``sizes`` a pipeline should dispatch.
+
+    Next fit when every job is small against the budget (first fit is
+    quadratic in the batches), first fit otherwise. A batch of a few times
+    ``min_rows`` pads to the budget's shape, so when everything fits in two
+    budgets, the first fit into ``min_rows`` batches is tried too, and the
+    packing with the fewer padded rows (:func:`padded_rows`) is kept.
+
+    Example:
+      >>> cap = lambda rows, n: max(4, 1 << (rows - 1).bit_length())
+      >>> choose_packing([(3,), (3,), (3,)], 16, cap, lambda need: need, 4)
+      [[0, 1, 2]]
+    """
+    small = not sizes or max(s[0] for s in sizes) <= budget // SMALL_JOB
+    packing = (pack_next_fit if small else pack_first_fit)(sizes, budget, capacity)
+    if min_rows < budget and sum(s[0] for s in sizes) <= 2 * budget:
+        other = pack_first_fit(sizes, min_rows, capacity)
+        if padded_rows(other, sizes, capacity, shape_for) < padded_rows(packing, sizes, capacity, shape_for):
+            packing = other
+    return packing

@@ -1,0 +1,400 @@
+"""The curve engine: what the greedy loop calls, over one transport plan.
+
+:class:`CurveEngine` owns the pieces of a 2D decimation and calls them one
+way: the loop (:mod:`otjax.decimation.loop`) asks it to score half-edges,
+take scored ones, apply them and relocate vertices; the engine calls the
+stencil cache and :mod:`~otjax.curves.export` (jobs -> flat batches), the
+:class:`~otjax.curves.scorer.Scorer` (kernel), reads the results, and
+applies changes to the :class:`~otjax.curves.plan.TransportPlan`, whose
+:class:`~otjax.curves.plan.Change` it hands to the
+:class:`~otjax.curves.rescoring.ChangeLog` and returns. Nothing below it
+calls back up.
+
+It also serves research code (the notebooks): export candidates, score
+them, apply one.
+"""
+
+from __future__ import annotations
+
+import itertools
+import time
+from typing import NamedTuple
+
+import numpy as np
+
+from otjax.batch.packing import choose_packing
+from otjax.batch.pipeline import pipelined
+from otjax.curves import scoring
+from otjax.curves.export import HostBatch, batch_of_located, export_jobs
+from otjax.curves.plan import Change, TransportPlan
+from otjax.curves.relocation import optimal_position
+from otjax.curves.rescoring import ChangeLog, LinkUpdates
+from otjax.curves.scorer import ROW_BUDGET, SHAPES, Scorer
+from otjax.curves.stencils import CandidateCost, CandidateStencil, StencilCache
+from otjax.curves.triangulation import Triangulation
+
+# Collapses whose stencil has fewer rows are scored again in full rather than
+# updated on their link (docs/decisions.md#update_min_rows).
+UPDATE_MIN_ROWS = 512
+
+
+class Scored(NamedTuple):
+    """A scored candidate, ready for :meth:`CurveEngine.apply`."""
+
+    candidate: CandidateStencil
+    cost: CandidateCost
+
+
+class CurveEngine:
+    """A transport plan and the machinery that scores and applies its changes.
+
+    Args:
+      tri: the triangulation (owned and mutated from now on).
+      points: ``(n, 2)`` float64 input points.
+      mass: ``(n,)`` float64 non-negative masses.
+      dtype: float dtype of the cost arithmetic (float64 for the exact
+        greedy order); point location is float64 whatever this is.
+      max_source_degree: see :class:`~otjax.curves.stencils.StencilCache`.
+      incremental: bring the scores of collapses whose star kept its
+        triangles up to date on the changed edges only (same scores, fewer
+        scored rows), when the loop re-scores everything a change made dirty.
+      update_min_rows: stencils below this many rows are scored again in
+        full instead (docs/decisions.md#update_min_rows).
+
+    Needs JAX's float64 mode (``jax.enable_x64``) for every call that scores.
+
+    Example:
+      >>> import jax, numpy as np
+      >>> p = np.random.default_rng(0).random((40, 2))
+      >>> with jax.enable_x64(True):
+      ...     engine = CurveEngine(Triangulation(p), p, np.ones(40))
+      ...     delta, costs = engine.score_candidates(engine.candidates(range(len(p))))
+      >>> len(delta) > 0
+      True
+    """
+
+    def __init__(self, tri: Triangulation, points: np.ndarray, mass: np.ndarray, *, dtype=np.float64,
+                 max_source_degree: int = 32, incremental: bool = True, update_min_rows: int = UPDATE_MIN_ROWS):
+        self.plan = TransportPlan(tri, points, mass)
+        self.log = ChangeLog(len(tri.xy))
+        self.stencils = StencilCache(self.plan, self.log, max_source_degree)
+        self.scorer = Scorer(self.plan.points, self.plan.mass, dtype)
+        self.links = LinkUpdates(self.plan, self.log, self.stencils)
+        self.incremental = incremental
+        self.update_min_rows = update_min_rows
+        self.counts = {"scored": 0, "updated": 0, "partial": 0}
+        self.seconds = {"export": 0.0, "score": 0.0}
+        self._hot: dict = {}  # key -> (Scored, version): the latest scoring call's stencils
+        self._records: dict[int, dict] = {}  # {source: {target: LinkRecord}}
+        self._partial: dict = {}  # key -> Partial, within one score call
+        keys, parts = self.plan.points_by_edge()
+        self.plan.set_edge_costs(keys, self.scorer.edge_costs(parts, tri.xy[keys]))
+
+    # ------------------------------------------------------------ the loop's view
+    @property
+    def versions(self) -> list[int]:
+        """Per-vertex versions (read only): a score is stale once its source's moved on."""
+        return self.log.version
+
+    @property
+    def degree_bound(self) -> int:
+        """Sources of higher degree are not candidates (sampling draws below it)."""
+        return self.stencils.max_source_degree
+
+    def live_sources(self) -> list[int]:
+        """Vertices that may still be removed, increasing."""
+        tri = self.plan.tri
+        return np.nonzero(tri.alive & ~tri.pinned)[0].tolist()
+
+    def ring(self, v: int) -> tuple[int, ...]:
+        """CCW one-ring of a live free vertex."""
+        return self.plan.tri.star(v)[0]
+
+    def free(self, v: int) -> bool:
+        """Whether ``v`` may be a collapse target (not a pinned corner)."""
+        return not self.plan.tri.pinned[v]
+
+    def prefetch(self, half_edges) -> None:
+        """Reads the regions and plans of ``half_edges`` into the caches."""
+        self.stencils.prefetch(half_edges)
+
+    def stats(self) -> dict:
+        """Counters: ``scored``, ``updated``, ``partial``, ``kernel_calls``, and
+        ``seconds`` (``export``, ``score``)."""
+        return {**self.counts, "kernel_calls": self.scorer.calls, "seconds": dict(self.seconds)}
+
+    def score(self, sources, targets: dict | None = None, *, veto=None, keep: bool = True,
+              while_waiting=None) -> list[tuple[tuple[int, int], float]]:
+        """Scores the half-edges leaving ``sources``, batch by batch.
+
+        Args:
+          sources: vertex ids (scored in increasing order).
+          targets: optional ``{source: targets}``; ``None`` scores every
+            half-edge of each source, and then (``incremental``, no veto)
+            collapses scored before whose star kept its triangles are
+            updated on what changed instead of scored again.
+          veto: optional ``(candidate, cost) -> bool``; rejected candidates
+            are left out.
+          keep: keep the stencils at hand for :meth:`take`.
+          while_waiting: host work to run once every batch is dispatched.
+
+        Returns:
+          ``[(half-edge, delta)]`` of the admissible candidates.
+        """
+        self._hot = {}
+        sources = sorted(sources)
+        full, updates, partial = sources, [], []
+        tracking = self.incremental and veto is None and targets is None
+        if tracking:
+            t0 = time.perf_counter()
+            targets, updates, partial = self._split(sources)
+            self.seconds["export"] += time.perf_counter() - t0
+            full = sorted(targets)
+        self._partial = {(job.plan.source, job.plan.target): pending for job, pending in partial}
+        entered: list = []
+
+        def settle(batch, handle):
+            self._settle(batch, handle, entered, veto, keep, tracking)
+
+        batches = self._timed(self.exports(full, targets, extra=[job for job, _ in partial]))
+        pipelined(batches, self._dispatch, settle, while_waiting=while_waiting)
+        if updates:
+            t0 = time.perf_counter()
+            parts = self.links.link_parts(updates)
+            keys = np.asarray([p.key for p in parts], np.int64).reshape(-1, 2)
+            costs = self.scorer.edge_costs([p.points for p in parts], self.plan.tri.xy[keys])[:, 0]
+            for rec, delta in self.links.finish_links(updates, parts, costs):
+                key = (rec.plan.source, rec.plan.target)
+                self._records.setdefault(key[0], {})[key[1]] = rec
+                entered.append((key, delta))
+            self.seconds["score"] += time.perf_counter() - t0
+            self.counts["updated"] += len(updates)
+        return entered
+
+    def _timed(self, batches):
+        """``batches``, the time to make each counted as export."""
+        it = iter(batches)
+        while True:
+            t0 = time.perf_counter()
+            batch = next(it, None)
+            if batch is None:
+                return
+            self.seconds["export"] += time.perf_counter() - t0
+            yield batch
+
+    def _dispatch(self, batch: HostBatch):
+        t0 = time.perf_counter()
+        handle = self.scorer.dispatch(batch)
+        self.seconds["score"] += time.perf_counter() - t0
+        return handle
+
+    def _collect(self, batch: HostBatch, handle) -> list[CandidateCost]:
+        t0 = time.perf_counter()
+        _delta, costs = self.scorer.collect(batch, handle)
+        self.seconds["score"] += time.perf_counter() - t0
+        self.counts["scored"] += len(costs)
+        return costs
+
+    def _settle(self, batch, handle, entered: list, veto, keep: bool, tracking: bool) -> None:
+        """Reads a dispatched batch into ``entered`` (and records, hot stencils)."""
+        for c, r in zip(batch.cands, self._collect(batch, handle)):
+            key = (c.plan.source, c.plan.target)
+            part = self._partial.pop(key, None)
+            if part is not None:  # scored in part: not a whole stencil, never kept
+                rec, delta = self.links.finish_partial(part, c, r)
+                self._records.setdefault(key[0], {})[key[1]] = rec
+                entered.append((key, delta))
+                self.counts["partial"] += 1
+                continue
+            if veto is not None and not veto(c, r):
+                continue
+            delta = r.delta
+            if tracking and len(c.point_ids) >= self.update_min_rows:
+                rec = self.links.record(c, r)
+                self._records.setdefault(key[0], {})[key[1]] = rec
+                delta = rec.delta(c.before)
+            entered.append((key, delta))
+            if keep:
+                self._hot[key] = (Scored(c, r), self.log.version[key[0]])
+
+    def _split(self, sources):
+        """Sources' half-edges to score in full (``{source: targets}``),
+        ``(record, changed links)`` of those only their link changed, and
+        ``(job, pending)`` of those a ring move changed in part."""
+        tri = self.plan.tri
+        full: dict[int, list[int]] = {}
+        updates, partial = [], []
+        for v in sources:
+            recs = self._records.pop(v, {})
+            if not tri.alive[v] or tri.pinned[v]:
+                continue
+            for w in tri.star(v)[0]:
+                rec = recs.get(w)
+                changes = None if rec is None else self.links.record_changes(rec)
+                if changes is not None and changes[1]:
+                    part = self.links.partial_job(rec, *changes)
+                    if part is not None:
+                        partial.append(part)
+                        continue
+                elif changes is not None:
+                    updates.append((rec, changes[0]))
+                    continue
+                full.setdefault(v, []).append(w)
+        return full, updates, partial
+
+    def take(self, keys) -> list[Scored]:
+        """The scored candidates of fresh half-edges ``keys``, exporting again
+        those not at hand (the same stencil: nothing around it changed)."""
+        out: dict = {}
+        again: dict[int, list[int]] = {}
+        version = self.log.version
+        for key in keys:
+            h = self._hot.pop(key, None)
+            if h is not None and h[1] == version[key[0]]:
+                out[key] = h[0]
+            else:
+                again.setdefault(key[0], []).append(key[1])
+            self._records.pop(key[0], None)
+        if again:
+            t0 = time.perf_counter()
+            batch = self.export(sorted(again), again)
+            self.seconds["export"] += time.perf_counter() - t0
+            handle = self._dispatch(batch)
+            for c, r in zip(batch.cands, self._collect(batch, handle)):
+                out[(c.plan.source, c.plan.target)] = Scored(c, r)
+        return [out[key] for key in keys]
+
+    def apply(self, candidate: CandidateStencil, cost: CandidateCost) -> Change:
+        """Applies a scored change to the plan and logs it; returns the :class:`Change`."""
+        change = self.plan.apply(candidate, cost)
+        self.log.record(change)
+        self.stencils.forget(change.source)
+        return change
+
+    def relocate(self, vertices, veto=None) -> tuple[set[int], int]:
+        """Moves each of ``vertices`` to its closed-form position where that
+        lowers the cost (:func:`~otjax.curves.relocation.optimal_position`).
+
+        Moves of adjacent vertices interact, so the work is done in rounds:
+        each round scores the moves of every vertex still waiting in one
+        batched call and applies the improving ones by decreasing gain,
+        skipping any whose stencil a move of this round touched (those wait
+        for the next round). Every vertex is considered once.
+
+        Returns:
+          ``(dirty, moved)``: vertices whose collapse stencils changed, and
+          how many vertices moved.
+        """
+        tri = self.plan.tri
+        waiting = [v for v in dict.fromkeys(vertices) if tri.alive[v] and not tri.pinned[v]]
+        dirty: set[int] = set()
+        moved = 0
+        while waiting:
+            moves = [(v, pos) for v, pos in ((v, optimal_position(self.plan, v)) for v in waiting)
+                     if pos is not None and np.all(np.isfinite(pos)) and np.any(pos != tri.xy[v])]
+            cands, delta, rows = self.score_batches(self.relocation_exports(moves))
+            if not cands:
+                break
+            blocked: set[int] = set()
+            done: set[int] = set()
+            for i in np.argsort(delta, kind="stable"):
+                c = cands[i]
+                v = c.plan.source
+                if delta[i] >= 0:
+                    done.add(v)
+                    continue
+                if v in blocked:
+                    continue
+                if veto is not None and not veto(c, rows[i]):
+                    done.add(v)
+                    continue
+                changed = self.apply(c, rows[i]).dirty
+                dirty |= changed
+                blocked |= changed
+                moved += 1
+                done.add(v)
+            proposed = {c.plan.source for c in cands}
+            waiting = [v for v in waiting if v in proposed and v not in done]
+        return dirty, moved
+
+    # ------------------------------------------------------------ research API
+    def total_cost(self) -> float:
+        """Squared W2 cost of the current plan."""
+        return self.plan.total_cost()
+
+    @property
+    def compiled_shapes(self) -> int:
+        """Distinct kernel shapes used (scoring and location kernels)."""
+        return self.scorer.compiled_shapes
+
+    def exports(self, sources, targets: dict | None = None, budget: int = ROW_BUDGET, extra=()):
+        """Batches of the half-edges leaving ``sources`` (then the jobs
+        ``extra``), packed into few capacities (:func:`~otjax.batch.packing.choose_packing`);
+        a generator, so the next batch is exported while the kernel scores
+        the last. Each batch's ``seq`` says where its jobs stand."""
+        jobs = itertools.chain((job for v in sources for job in self.stencils.collapse_jobs([v], targets)), extra)
+        return self._packed(jobs, budget)
+
+    def relocation_exports(self, moves, budget: int = ROW_BUDGET):
+        """:meth:`exports` for ``(v, position)`` moves (those that keep the embedding)."""
+        return self._packed(self.stencils.move_jobs(moves), budget)
+
+    def _packed(self, jobs_iter, budget: int):
+        jobs = list(jobs_iter)  # lazily, at the first batch (timed as export)
+        packing = choose_packing([job.size() for job in jobs], budget, scoring.capacity, SHAPES.shape_for,
+                                 scoring.MIN_ROWS)
+        for members in packing:
+            batch = self._export([jobs[i] for i in members], on_host=False)
+            batch.seq = np.asarray(members, np.int64)
+            yield batch
+
+    def _export(self, jobs, on_host: bool) -> HostBatch:
+        plan = self.plan
+        return export_jobs(jobs, plan.tri.xy, plan.points, plan.point_rows, on_host)
+
+    def export(self, sources, targets: dict | None = None) -> HostBatch:
+        """The half-edges leaving ``sources`` as one flat batch, left for the kernel to locate."""
+        return self._export(self.stencils.collapse_jobs(sources, targets), on_host=False)
+
+    def candidates(self, sources, targets: dict | None = None) -> list[CandidateStencil]:
+        """Located collapse stencils of the half-edges leaving ``sources``
+        (dead, pinned and high-degree sources skipped), in source then ring
+        order; half-edges that cannot be collapsed are left out."""
+        batch = self._export(self.stencils.collapse_jobs(sources, targets), on_host=True)
+        self.scorer.note(batch)
+        return batch.cands
+
+    def candidate(self, source: int, target: int) -> CandidateStencil | None:
+        """The stencil of collapsing ``source`` onto ``target``, or ``None``."""
+        out = self.candidates([source], {source: [target]})
+        return out[0] if out else None
+
+    def relocation_candidates(self, moves) -> list[CandidateStencil]:
+        """Located stencils of the ``(v, position)`` moves that keep the embedding."""
+        batch = self._export(list(self.stencils.move_jobs(moves)), on_host=True)
+        self.scorer.note(batch)
+        return batch.cands
+
+    def relocation_candidate(self, v: int, position) -> CandidateStencil | None:
+        """The stencil of moving ``v`` to ``position``, or ``None`` if it would fold a triangle."""
+        out = self.relocation_candidates([(v, position)])
+        return out[0] if out else None
+
+    def score_candidates(self, cands: list[CandidateStencil]) -> tuple[np.ndarray, list[CandidateCost]]:
+        """``(delta, costs)`` of located candidates, in batches of about
+        :data:`~otjax.curves.scorer.ROW_BUDGET` rows."""
+        chunks, run, used = [], [], 0
+        for c in cands:
+            if run and used + len(c.point_ids) > ROW_BUDGET:
+                chunks.append(run)
+                run, used = [], 0
+            run.append(c)
+            used += len(c.point_ids)
+        if run:
+            chunks.append(run)
+        _, delta, costs = self.score_batches(batch_of_located(chunk) for chunk in chunks)
+        return delta, costs
+
+    def score_batches(self, batches):
+        """``(cands, delta, costs)`` of exported batches (see :meth:`Scorer.score_batches`)."""
+        return self.scorer.score_batches(batches)

@@ -1,0 +1,336 @@
+"""Jobs laid end to end as one flat host batch, and the kernel's outputs read back.
+
+:func:`export_jobs` writes a list of :class:`~otjax.curves.stencils.Job` s
+as a :class:`HostBatch`: every job's new triangles, local edges (numbered in
+increasing key within the job), rows (the points of its region, then those
+across its link that keep their edge) and fan, on concatenated arrays (the
+per-job Python work is slicing only). :meth:`HostBatch.values` is what the
+:data:`~otjax.curves.scoring.FIELDS` layout packs. :func:`read_costs` cuts
+the kernel's outputs back into one :class:`CandidateCost` per job.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from otjax.batch.fields import Gather, Prefix
+from otjax.curves import scoring
+from otjax.curves.location import MIN_PAIRS as LOCATE_MIN_PAIRS
+from otjax.curves.location import locate_pairs
+from otjax.curves.stencils import CandidateCost, CandidateStencil, Job, triangle_edges
+from otjax.stencil import ragged_index
+
+_NO_IDS = np.zeros(0, np.int64)
+
+
+@dataclass
+class HostBatch:
+    """One flat batch on the host: candidates, rows, edges and triangles end
+    to end (unpadded, ids of any width), and what reading the results needs.
+
+    See :class:`otjax.curves.scoring.FlatBatch` for the fields shared with the
+    kernel; the others: ``cands`` (the :class:`CandidateStencil` of each job),
+    ``row_point`` (``(R,)`` point id of each row), ``row_tri`` (local triangle
+    of a row located on the host, else ``-1``), ``row_start``,
+    ``edge_start``, ``tri_start`` (``(J + 1,)`` offsets per job), ``before``
+    (``(J,)``), ``seq`` (where each job stands in the job list a packed export
+    was made from) and ``located_by_kernel`` (whether host location used the
+    location kernel: one more compiled shape).
+    """
+
+    cands: list
+    row_point: np.ndarray
+    row_job: np.ndarray
+    row_cand: np.ndarray
+    row_locate: np.ndarray
+    row_tri: np.ndarray
+    row_start: np.ndarray
+    edge_start: np.ndarray
+    tri_start: np.ndarray
+    edge_xy: np.ndarray
+    edge_job: np.ndarray
+    tri_xy: np.ndarray
+    tri_edges: np.ndarray
+    fan_key: np.ndarray
+    fan_tri: np.ndarray
+    job_fan: np.ndarray
+    job_apex: np.ndarray
+    job_theta: np.ndarray
+    job_ears: np.ndarray
+    before: np.ndarray
+    seq: np.ndarray | None = None
+    located_by_kernel: bool = False
+
+    @classmethod
+    def empty(cls) -> HostBatch:
+        return cls.without_triangles(_NO_IDS, np.zeros((0, 3), np.int64), _NO_IDS, np.zeros((0, 2, 2)),
+                                     _NO_IDS, [])
+
+    @classmethod
+    def without_triangles(cls, row_point, row_cand, row_job, edge_xy, edge_job, cands, before=None,
+                          row_tri=None) -> HostBatch:
+        """A batch whose every row comes with its candidate edges."""
+        nj = len(cands)
+        n = len(row_point)
+        return cls(
+            cands=cands, row_point=row_point, row_job=row_job, row_cand=row_cand,
+            row_locate=np.zeros(n, bool), row_tri=np.full(n, -1, np.int64) if row_tri is None else row_tri,
+            row_start=np.searchsorted(row_job, np.arange(nj + 1)),
+            edge_start=np.searchsorted(edge_job, np.arange(nj + 1)), tri_start=np.zeros(nj + 1, np.int64),
+            edge_xy=edge_xy, edge_job=edge_job, tri_xy=np.zeros((6, 0)), tri_edges=np.zeros((0, 3), np.int64),
+            fan_key=np.zeros(0), fan_tri=_NO_IDS, job_fan=np.zeros(nj + 1, np.int64), job_apex=np.zeros((nj, 2)),
+            job_theta=np.zeros(nj), job_ears=np.full((nj, scoring.MAX_EARS), -1, np.int64),
+            before=np.zeros(nj) if before is None else before)
+
+    def need(self) -> int:
+        """The smallest row capacity that fits this batch (:func:`scoring.capacity`)."""
+        return scoring.capacity(len(self.row_point), len(self.edge_job), len(self.tri_edges),
+                                len(self.job_theta))
+
+    def values(self, points: np.ndarray, mass: np.ndarray) -> dict:
+        """The batch as :data:`scoring.FIELDS` values, the rows' points and
+        masses gathered from ``points (n, 2)`` and ``mass (n,)``."""
+        return {
+            "row_xy": Gather(points, self.row_point), "row_mass": Gather(mass, self.row_point),
+            "row_job": self.row_job, "row_cand": self.row_cand, "row_locate": self.row_locate,
+            "row_valid": Prefix(len(self.row_point), 1), "tri_xy": self.tri_xy.T, "tri_edges": self.tri_edges,
+            "fan_key": self.fan_key, "fan_tri": self.fan_tri, "job_fan": self.job_fan,
+            "job_apex": self.job_apex, "job_theta": self.job_theta, "job_ears": self.job_ears,
+            "edge_xy": self.edge_xy, "edge_valid": Prefix(len(self.edge_job), 1), "edge_job": self.edge_job,
+        }
+
+
+def _new_triangles(jobs: list[Job], xy: np.ndarray):
+    """``(tris (T, 3), coords (T, 3, 2), tri_start (J + 1,))`` of the jobs,
+    the moved vertex of a move at its new position."""
+    n_tri = np.array([len(job.triangles) for job in jobs])
+    tris = np.concatenate([job.triangles for job in jobs])
+    coords = xy[tris]
+    tri_start = np.concatenate([[0], np.cumsum(n_tri)])
+    for j, job in enumerate(jobs):
+        if job.moved is not None:
+            s = slice(tri_start[j], tri_start[j + 1])
+            coords[s] = np.where((job.triangles == job.plan.source)[..., None], job.moved, coords[s])
+    return tris, coords, tri_start
+
+
+def _local_edges(jobs: list[Job], tris: np.ndarray, tri_start: np.ndarray, xy: np.ndarray):
+    """Local edges of every job: ``(ucode, ukeys, edge_start, edge_job, edge_xy, tri_edges)``.
+
+    Keys are coded job-major, so ``np.unique`` numbers every job's edges
+    contiguously and in increasing key order within the job: the flat number
+    of an edge is its job's offset plus its local one.
+    """
+    nv = len(xy)
+    nj = len(jobs)
+    tri_job = np.repeat(np.arange(nj), np.diff(tri_start))
+    e = triangle_edges(tris)  # (T, 3, 2)
+    code = (np.repeat(tri_job, 3) * nv + e[..., 0].ravel()) * nv + e[..., 1].ravel()
+    ucode, inv = np.unique(code, return_inverse=True)
+    edge_job = ucode // (nv * nv)
+    edge_start = np.searchsorted(edge_job, np.arange(nj + 1))
+    ukeys = np.stack([(ucode // nv) % nv, ucode % nv], 1)
+    tri_edges = np.sort(inv.reshape(-1, 3), 1)
+    edge_xy = xy[ukeys]
+    for j, job in enumerate(jobs):
+        if job.moved is not None:
+            es = slice(edge_start[j], edge_start[j + 1])
+            edge_xy[es] = np.where((ukeys[es] == job.plan.source)[..., None], job.moved, edge_xy[es])
+    return ucode, ukeys, edge_start, edge_job, edge_xy, tri_edges
+
+
+def _rows(jobs: list[Job], ucode: np.ndarray, edge_start: np.ndarray, nv: int):
+    """Rows of every job: the points of its region, then the points across
+    its link that keep their link edge (their candidate: that edge); rows
+    whose edge is known (a partial update) are fixed to it.
+
+    Returns ``(row_point, row_job, row_cand, row_locate, row_start, n_in)``.
+    """
+    nj = len(jobs)
+    n_in = np.array([len(job.region.inside) for job in jobs])
+    n_out = np.array([len(job.region.outside) for job in jobs])
+    n_rows = n_in + n_out
+    row_start = np.concatenate([[0], np.cumsum(n_rows)])
+    parts = []
+    for job in jobs:
+        parts += [job.region.inside, job.region.outside]
+    row_point = np.concatenate(parts).astype(np.int64)
+    row_job = np.repeat(np.arange(nj), n_rows)
+    row_cand = np.zeros((len(row_point), 3), np.int64)
+    row_locate = np.ones(len(row_point), bool)
+    if n_out.sum():
+        out_job, k = ragged_index(n_out)
+        out_rows = row_start[out_job] + n_in[out_job] + k
+        ring_arr = [np.asarray(job.region.ring, np.int64) for job in jobs]
+        a = np.concatenate([r[job.region.outside_link] for r, job in zip(ring_arr, jobs)])
+        b = np.concatenate([r[(job.region.outside_link + 1) % len(r)] for r, job in zip(ring_arr, jobs)])
+        lk = (out_job * nv + np.minimum(a, b)) * nv + np.maximum(a, b)
+        row_cand[out_rows] = np.searchsorted(ucode, lk)[:, None]
+        row_locate[out_rows] = False
+    for j, job in enumerate(jobs):
+        if job.fixed_edge is not None:
+            k = np.flatnonzero(job.fixed_edge >= 0)
+            row_cand[row_start[j] + k] = (edge_start[j] + job.fixed_edge[k])[:, None]
+            row_locate[row_start[j] + k] = False
+    return row_point, row_job, row_cand, row_locate, row_start, n_in
+
+
+def _fans(jobs: list[Job], coords: np.ndarray, tri_start: np.ndarray):
+    """The new triangles of a job are its flipped-out ears, then a fan around
+    one apex (the target, or the moved vertex), CCW: the fan keys the kernel
+    searches and the ears it tests.
+
+    Returns ``(fan_key, fan_tri, job_fan, apex, theta, ears, few)``; ``few``:
+    whether a job's ears fit the kernel's :data:`scoring.MAX_EARS`.
+    """
+    nj = len(jobs)
+    n_tri = np.diff(tri_start)
+    n_flip = np.fromiter((len(job.plan.flipped_out) for job in jobs), np.int64, nj)
+    fan_start = tri_start[:-1] + n_flip
+    n_fan = n_tri - n_flip
+    job_fan = np.concatenate([[0], np.cumsum(n_fan)])
+    fan_job, k = ragged_index(n_fan)
+    fan_tri = fan_start[fan_job] + k
+    apex = coords[fan_start, 0]  # (J, 2): fan triangles are (apex, a, b)
+    d = coords[fan_start, 1] - apex
+    theta = scoring.pseudo_angle(d[:, 0], d[:, 1])
+    d = coords[fan_tri, 1] - apex[fan_job]
+    phi = np.mod(scoring.pseudo_angle(d[:, 0], d[:, 1]) - theta[fan_job], 4.0)
+    phi[job_fan[:-1]] = 0.0
+    ears = np.full((nj, scoring.MAX_EARS), -1, np.int64)
+    few = n_flip <= scoring.MAX_EARS
+    ej, k = ragged_index(np.where(few, n_flip, 0))
+    ears[ej, k] = tri_start[ej] + k
+    return fan_job * 8.0 + phi, fan_tri, job_fan, apex, theta, ears, few
+
+
+def export_jobs(jobs: list[Job], xy: np.ndarray, points: np.ndarray, point_rows: np.ndarray,
+                on_host: bool) -> HostBatch:
+    """The flat :class:`HostBatch` of ``jobs``.
+
+    Args:
+      jobs: the jobs, against the current state.
+      xy: ``(V, 2)`` vertex positions of the triangulation.
+      points, point_rows: the plan's ``(n, 2)`` points and their ``(2, n)`` rows.
+      on_host: locate every point here (exactly); otherwise only the points
+        of jobs with more ears than the kernel tests.
+    """
+    if not jobs:
+        return HostBatch.empty()
+    nv = len(xy)
+    tris, coords, tri_start = _new_triangles(jobs, xy)
+    ucode, ukeys, edge_start, edge_job, edge_xy, tri_edges = _local_edges(jobs, tris, tri_start, xy)
+    row_point, row_job, row_cand, row_locate, row_start, n_in = _rows(jobs, ucode, edge_start, nv)
+    fan_key, fan_tri, job_fan, apex, theta, ears, few = _fans(jobs, coords, tri_start)
+    batch = HostBatch(
+        cands=[], row_point=row_point, row_job=row_job, row_cand=row_cand, row_locate=row_locate,
+        row_tri=np.full(len(row_point), -1, np.int64), row_start=row_start, edge_start=edge_start,
+        tri_start=tri_start, edge_xy=edge_xy, edge_job=edge_job,
+        tri_xy=np.ascontiguousarray(coords.reshape(-1, 6).T), tri_edges=tri_edges, fan_key=fan_key,
+        fan_tri=fan_tri, job_fan=job_fan, job_apex=apex, job_theta=theta, job_ears=ears,
+        before=np.array([job.region.before for job in jobs]))
+    if on_host:
+        locate_on_host(batch, np.arange(len(jobs)), points, point_rows)
+    elif not few.all():
+        locate_on_host(batch, np.flatnonzero(~few), points, point_rows)
+    for j, job in enumerate(jobs):
+        es = slice(edge_start[j], edge_start[j + 1])
+        rs = slice(row_start[j], row_start[j + 1])
+        cand = tri = None
+        if on_host:
+            cand = row_cand[rs] - edge_start[j]
+            tri = batch.row_tri[rs]
+        batch.cands.append(CandidateStencil(job.plan, ukeys[es], edge_xy[es], row_point[rs], int(n_in[j]),
+                                            float(batch.before[j]), job.moved, cand, tri))
+    return batch
+
+
+def locate_on_host(batch: HostBatch, jobs: np.ndarray, points: np.ndarray, point_rows: np.ndarray) -> None:
+    """Locates the region points of ``jobs`` exactly, on the host.
+
+    Sets their ``row_cand`` and ``row_tri`` and clears ``row_locate``.
+
+    A guess first: the angular sector around the fan apex that the point
+    falls in (one ``searchsorted`` for all jobs). The exact test confirms
+    each guess; points it rejects (in an ear, near a sector boundary, on the
+    apex) are tested against every new triangle of their job. So the answer
+    is the exact perturbed location in every case, at about one tested pair
+    per point instead of ``deg - 2``.
+    """
+    in_job = np.zeros(len(batch.row_start) - 1, bool)
+    in_job[jobs] = True
+    rows = np.flatnonzero(batch.row_locate & in_job[batch.row_job])
+    if not len(rows):
+        return
+    inside = batch.row_point[rows]
+    pt_job = batch.row_job[rows]
+    tri_start = batch.tri_start
+    n_tri = np.diff(tri_start)
+    d = np.take(points, inside, axis=0) - batch.job_apex[pt_job]
+    phi = np.mod(scoring.pseudo_angle(d[:, 0], d[:, 1]) - batch.job_theta[pt_job], 4.0)
+    lo, hi = batch.job_fan[pt_job], batch.job_fan[pt_job + 1] - 1
+    g = np.clip(np.searchsorted(batch.fan_key, pt_job * 8.0 + phi, side="right") - 1, lo, hi)
+    guess = batch.fan_tri[g]
+    ok = locate_pairs(batch.tri_xy[:, guess], point_rows[:, inside])
+    batch.located_by_kernel |= len(inside) >= LOCATE_MIN_PAIRS
+    found = np.where(ok, guess, -1)
+    rest = np.flatnonzero(~ok)
+    if len(rest):
+        job = pt_job[rest]
+        pair_pt, k = ragged_index(n_tri[job])
+        pair_tri = tri_start[job][pair_pt] + k
+        hold = locate_pairs(batch.tri_xy[:, pair_tri], point_rows[:, inside[rest[pair_pt]]])
+        batch.located_by_kernel |= len(pair_pt) >= LOCATE_MIN_PAIRS
+        hit = np.flatnonzero(hold)
+        # The perturbed location is a partition: exactly one triangle each.
+        if len(hit) != len(rest) or np.any(pair_pt[hit] != np.arange(len(rest))):
+            raise RuntimeError("a point of the star is not covered exactly once after the change")
+        found[rest] = pair_tri[hit]
+    batch.row_cand[rows] = batch.tri_edges[found]
+    batch.row_tri[rows] = found - tri_start[pt_job]
+    batch.row_locate[rows] = False
+
+
+def batch_of_located(cands: list[CandidateStencil]) -> HostBatch:
+    """A flat batch of located candidates (from an ``on_host`` export)."""
+    if any(c.cand is None for c in cands):
+        raise ValueError("candidates exported for the kernel to locate are scored as the batch they came in")
+    n_edges = np.array([len(c.keys) for c in cands], np.int64)
+    edge_start = np.concatenate([[0], np.cumsum(n_edges)])
+    n_rows = np.array([len(c.point_ids) for c in cands], np.int64)
+    row_job = np.repeat(np.arange(len(cands)), n_rows)
+    return HostBatch.without_triangles(
+        np.concatenate([c.point_ids for c in cands]),
+        np.concatenate([c.cand for c in cands]) + edge_start[row_job][:, None], row_job,
+        np.concatenate([c.edges for c in cands]), np.repeat(np.arange(len(cands)), n_edges), cands,
+        before=np.array([c.before for c in cands]),
+        row_tri=np.concatenate([c.triangle_of_point for c in cands]))
+
+
+def cut_outputs(batch: HostBatch, outputs: tuple) -> tuple:
+    """The kernel's host outputs cut to the batch's real jobs, edges and rows."""
+    total, per_edge, assignment, located, unresolved = outputs
+    nj, ne, nr = len(batch.row_start) - 1, len(batch.edge_job), len(batch.row_point)
+    return total[:nj], per_edge[:ne], assignment[:nr], located[:nr], unresolved[:nj]
+
+
+def read_costs(batch: HostBatch, outputs: tuple) -> tuple[np.ndarray, list[CandidateCost]]:
+    """``(delta (J,), costs)``: each job's cost increase and its
+    :class:`CandidateCost`, from the :func:`cut_outputs` of its scoring."""
+    total, per_edge, assignment, located, _ = outputs
+    delta = total - batch.before
+    # Local numbering: flat edges minus the job's offset, likewise triangles.
+    assignment = assignment - batch.edge_start[batch.row_job]
+    triangle = np.where(batch.row_locate, located - batch.tri_start[batch.row_job], batch.row_tri)
+    fields = [per_edge[:, i] for i in range(6)]
+    fields[5] = fields[5] > 0
+    out = []
+    for j, c in enumerate(batch.cands):
+        es = slice(batch.edge_start[j], batch.edge_start[j + 1])
+        r0 = batch.row_start[j]
+        rs = slice(r0, batch.row_start[j + 1])
+        out.append(CandidateCost(float(delta[j]), *(f[es] for f in fields), assignment[rs],
+                                 triangle[r0:r0 + c.n_inside]))
+    return delta, out

@@ -1,0 +1,136 @@
+"""Scoring flat batches with the fused kernel: dispatch, collect, pipelined runs.
+
+The :class:`Scorer` owns the :class:`~otjax.batch.pipeline.KernelPipeline`
+of :func:`otjax.curves.scoring.score_packed` and the points it gathers rows
+from. It neither builds batches (:mod:`otjax.curves.export` does) nor keeps
+results: it turns a :class:`~otjax.curves.export.HostBatch` into candidate
+costs, locating on the host the rows the kernel's filter was unsure of.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from otjax.batch.pipeline import Handle, KernelPipeline, ShapePolicy, pipelined
+from otjax.curves import scoring
+from otjax.curves.export import HostBatch, cut_outputs, locate_on_host, read_costs
+from otjax.curves.stencils import CandidateCost
+
+# Rows per kernel call in the decimation loop (docs/decisions.md#row_budget).
+ROW_BUDGET = 1 << 15
+SHAPES = ShapePolicy(scoring.MIN_ROWS, ROW_BUDGET)
+
+
+class Scorer:
+    """Runs the scoring kernel on host batches.
+
+    Args:
+      points: ``(n, 2)`` float64 input points.
+      mass: ``(n,)`` float64 masses.
+      dtype: float dtype of the cost arithmetic (location is float64 whatever
+        this is).
+    """
+
+    def __init__(self, points: np.ndarray, mass: np.ndarray, dtype=np.float64):
+        self.points = points
+        self.mass = mass
+        self.point_rows = np.ascontiguousarray(points.T)
+        self.pipeline = KernelPipeline(scoring.FIELDS, scoring.score_packed, SHAPES, dtype)
+        self.location_kernel_used = False
+
+    @property
+    def calls(self) -> int:
+        """Kernel calls made."""
+        return self.pipeline.calls
+
+    @property
+    def compiled_shapes(self) -> int:
+        """Distinct kernel shapes used: scoring kernel and location kernel."""
+        return len(self.pipeline.shapes_seen) + int(self.location_kernel_used)
+
+    def note(self, batch: HostBatch) -> None:
+        """Counts the location kernel if ``batch``'s export used it."""
+        self.location_kernel_used |= batch.located_by_kernel
+
+    def dispatch(self, batch: HostBatch) -> Handle | None:
+        """Pads and dispatches ``batch``; does not wait (``None`` if empty)."""
+        self.note(batch)
+        if not batch.cands:
+            return None
+        return self.pipeline.dispatch(batch.values(self.points, self.mass), batch.need())
+
+    def _wait(self, batch: HostBatch, handle: Handle) -> tuple:
+        return cut_outputs(batch, self.pipeline.wait(handle))
+
+    def collect(self, batch: HostBatch, handle: Handle | None) -> tuple[np.ndarray, list[CandidateCost]]:
+        """``(delta, costs)`` of a dispatched batch (waits for its kernel).
+
+        Jobs with a row the kernel could not locate (its filter unsure:
+        points on or within rounding of an edge, frequent on exactly
+        collinear input) are located on the host and scored again.
+        """
+        if handle is None:
+            return np.zeros(0), []
+        outputs = self._wait(batch, handle)
+        bad = np.flatnonzero(outputs[4])
+        if len(bad):
+            locate_on_host(batch, bad, self.points, self.point_rows)
+            self.note(batch)
+            outputs = self._wait(batch, self.dispatch(batch))
+        return read_costs(batch, outputs)
+
+    def score_batches(self, batches) -> tuple[list, np.ndarray, list[CandidateCost]]:
+        """Scores an iterable of batches, each dispatched before the last
+        one is collected.
+
+        Returns:
+          ``(cands, delta, costs)`` over all batches, in the order of the
+          jobs they were exported from (batches packed out of order carry
+          ``seq``), else in batch order.
+        """
+        cands, deltas, costs, seqs = [], [np.zeros(0)], [], [np.zeros(0, np.int64)]
+
+        def read(batch, handle):
+            d, c = self.collect(batch, handle)
+            deltas.append(d)
+            costs.extend(c)
+            seqs.append(len(cands) + np.arange(len(batch.cands)) if batch.seq is None else batch.seq)
+            cands.extend(batch.cands)
+
+        pipelined(batches, self.dispatch, read, in_flight=1)
+        delta = np.concatenate(deltas)
+        order = np.argsort(np.concatenate(seqs), kind="stable")
+        return [cands[i] for i in order], delta[order], [costs[i] for i in order]
+
+    def edge_costs(self, parts, edge_xy: np.ndarray, budget: int = ROW_BUDGET) -> np.ndarray:
+        """Costs of edges given with their points.
+
+        Args:
+          parts: per edge, a tuple of point-id arrays (concatenated in order).
+          edge_xy: ``(m, 2, 2)`` endpoints of each edge, lower id first.
+          budget: rows per call (whole edges per batch, within the shapes the
+            decimation loop uses anyway); each batch is dispatched before the
+            last is read.
+
+        Returns:
+          ``(m, 6)`` the kernel's per-edge fields (:data:`scoring.EDGE_FIELDS`).
+        """
+        counts = np.fromiter((sum(map(len, p)) for p in parts), np.int64, len(parts))
+
+        def batches():
+            first = 0
+            while first < len(parts):
+                rows = np.cumsum(counts[first:])
+                last = first + max(1, int(np.searchsorted(rows, budget, side="right")))
+                last = min(last, first + budget // scoring.EDGES_PER_ROW - 1)
+                ids = np.concatenate([a for p in parts[first:last] for a in p]).astype(np.int64)
+                edge_of_row = np.repeat(np.arange(last - first), counts[first:last])
+                yield HostBatch.without_triangles(
+                    ids, np.repeat(edge_of_row[:, None], 3, 1), np.zeros(len(ids), np.int64),
+                    edge_xy[first:last], np.zeros(last - first, np.int64), [None])
+                first = last
+
+        out = [np.zeros((0, 6))]
+        pipelined(batches(), self.dispatch, lambda batch, handle: out.append(self._wait(batch, handle)[1]),
+                  in_flight=1)
+        return np.concatenate(out)

@@ -1,0 +1,76 @@
+"""Scored half-edges, valid while their source's version holds, and the heap.
+
+The table owns the scores; the versions belong to the engine's change log
+and are only read here: an entry scored at an older version of its source
+is stale.
+"""
+
+from __future__ import annotations
+
+import heapq
+import itertools
+from typing import Callable, Sequence
+
+import numpy as np
+
+Key = tuple[int, int]
+
+
+class ScoreTable:
+    """Scores keyed by half-edge ``(source, target)``, and a lazy min-heap.
+
+    Args:
+      versions: per-vertex versions, owned by the engine (read only).
+      tie_rng: break exact ties by a random key drawn from this generator
+        rather than by insertion order. Exact ties (zero-cost collapses along
+        clean straight runs) pop in insertion order, i.e. along the run,
+        neighbours first; the parallel queue wants them spread out.
+    """
+
+    def __init__(self, versions: Sequence[int], tie_rng: np.random.Generator | None = None):
+        self.versions = versions
+        self.entries: dict[Key, tuple[float, int]] = {}  # key -> (delta, version)
+        self.heap: list = []
+        self.use_heap = False
+        self._tie = itertools.count() if tie_rng is None else iter(lambda: float(tie_rng.random()), None)
+
+    def fresh(self, key: Key) -> bool:
+        """Whether ``key`` has a score at its source's current version."""
+        entry = self.entries.get(key)
+        return entry is not None and entry[1] == self.versions[key[0]]
+
+    def delta(self, key: Key) -> float:
+        """The score of ``key`` (fresh or not)."""
+        return self.entries[key][0]
+
+    def enter(self, scored, order: Callable[[Key], tuple]) -> None:
+        """Enters ``[(key, delta)]`` at the current versions; with the heap in
+        use, pushes them in ``order`` (which decides exact ties)."""
+        versions = self.versions
+        for key, delta in scored:
+            self.entries[key] = (delta, versions[key[0]])
+        if self.use_heap:
+            for key in sorted((key for key, _ in scored), key=order):
+                self.push(key)
+
+    def push(self, key: Key) -> None:
+        delta, ver = self.entries[key]
+        heapq.heappush(self.heap, (delta, next(self._tie), key, ver))
+
+    def pop(self, live: Callable[[int], bool]) -> Key | None:
+        """The cheapest fresh entry whose source is ``live`` (removed from the
+        heap), or ``None``."""
+        while self.heap:
+            _, _, key, ver = heapq.heappop(self.heap)
+            entry = self.entries.get(key)
+            if entry is None or entry[1] != ver or ver != self.versions[key[0]]:
+                continue
+            if not live(key[0]):
+                continue
+            return key
+        return None
+
+    def discard(self, keys) -> None:
+        """Drops the entries of ``keys`` (taken to be applied)."""
+        for key in keys:
+            self.entries.pop(key, None)
