@@ -17,7 +17,9 @@ demo: install
 	$(BIN)/otjax curve --example noisy-star --points 1000 -o out/noisy-star.png -o out/noisy-star.svg \
 		-o out/noisy-star.json
 
+# The layer rules (pyproject.toml's import-linter contracts), then the suite.
 test: install
+	$(BIN)/lint-imports --no-cache
 	$(BIN)/python -m pytest -q -n 2 --dist loadfile
 
 .PHONY: install demo test

@@ -26,6 +26,8 @@ reconstruction parameters.
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import inspect
 from dataclasses import dataclass
 
@@ -392,7 +394,16 @@ def generate(
     return points, dict(truth, params=params)
 
 
-def load_example(name: str, seed: int = 0, n: int | None = None):
+class LoadedExample(NamedTuple):
+    """A built-in example, ready to run (unpacks as a 4-tuple)."""
+
+    points: np.ndarray
+    masses: np.ndarray
+    truth: dict
+    defaults: dict
+
+
+def load_example(name: str, seed: int = 0, n: int | None = None) -> LoadedExample:
     """Points, unit masses, ground truth and recommended parameters of a built-in example.
 
     Args:
@@ -415,4 +426,4 @@ def load_example(name: str, seed: int = 0, n: int | None = None):
         raise ValueError(f"unknown example {name!r}; valid names: {', '.join(_EXAMPLES)}")
     points, truth = generate(name, n=n, seed=seed)
     ex = _EXAMPLES[name]
-    return points, np.ones(len(points)), truth, {"n_vertices": ex.n_vertices, "relevance": ex.relevance}
+    return LoadedExample(points, np.ones(len(points)), truth, {"n_vertices": ex.n_vertices, "relevance": ex.relevance})

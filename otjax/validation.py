@@ -75,6 +75,24 @@ def _all_collinear(points: np.ndarray) -> bool:
     return True
 
 
+def _check_masses(masses, n: int) -> np.ndarray:
+    """``(n,)`` finite non-negative masses with a positive total, as float64."""
+    mass = _as_float_array(masses, "masses")
+    if mass.shape != (n,):
+        raise ValueError(f"masses must have shape ({n},) to match points, got shape {mass.shape}")
+    bad = ~np.isfinite(mass)
+    if bad.any():
+        count, first = _first_rows(bad)
+        raise ValueError(f"masses contain NaN or inf in {count} entr(ies), first at index {first}")
+    bad = mass < 0
+    if bad.any():
+        count, first = _first_rows(bad)
+        raise ValueError(f"masses must be >= 0: {count} negative, first at index {first}")
+    if not mass.sum() > 0:
+        raise ValueError("masses are all zero: the total mass must be positive")
+    return mass
+
+
 def check_points(
     points,
     masses=None,
@@ -118,23 +136,7 @@ def check_points(
         count, first = _first_rows(bad)
         raise ValueError(f"points contain NaN or inf in {count} row(s), first at row {first}")
 
-    if masses is None:
-        mass = np.ones(n)
-    else:
-        mass = _as_float_array(masses, "masses")
-        if mass.shape != (n,):
-            raise ValueError(f"masses must have shape ({n},) to match points, got shape {mass.shape}")
-        bad = ~np.isfinite(mass)
-        if bad.any():
-            count, first = _first_rows(bad)
-            raise ValueError(f"masses contain NaN or inf in {count} entr(ies), first at index {first}")
-        bad = mass < 0
-        if bad.any():
-            count, first = _first_rows(bad)
-            raise ValueError(f"masses must be >= 0: {count} negative, first at index {first}")
-        if not mass.sum() > 0:
-            raise ValueError("masses are all zero: the total mass must be positive")
-
+    mass = np.ones(n) if masses is None else _check_masses(masses, n)
     if np.all(pts == pts[0]):
         raise ValueError(f"all {n} points coincide at {pts[0].tolist()}")
     first, group = _group_duplicates(pts)

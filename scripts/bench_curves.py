@@ -117,15 +117,15 @@ def run_one(n: int, queue: str, seed: int, cache: str | None = None) -> dict:
 def machine_check() -> dict:
     """Milliseconds of two fixed workloads, run after the timed run: the
     machine's speed at the time of the row, to compare rows of a shared
-    machine whose speed drifts (this dev VM: 10-20% within an hour).
+    machine whose speed drifts (the benchmark VM: 10-20% within an hour).
 
     ``numpy_ms``: sorting 2^20 seeded random floats (one core, NumPy);
     ``kernel_ms``: one scoring-kernel call on an empty 32768-row batch (XLA,
     both cores; the shape every run above a few thousand points compiles).
     Each is the median of 15 runs. The kernel's inputs are plain (unaligned)
     NumPy zeros, not the library's reused aligned buffers
-    (``plan.PackedBuffers``), so the call includes copying them: kept so,
-    as every recorded row was measured that way.
+    (``PackedBuffers``), so the call includes copying them; every row in
+    ``docs/bench/`` is measured this way, so checks stay comparable.
     """
     import time
 
@@ -135,7 +135,7 @@ def machine_check() -> dict:
 
     x = np.random.default_rng(0).random(1 << 20)
     r = 1 << 15
-    floats, ints = (np.zeros(k) for k in scoring.layout(r)["_sizes"])
+    floats, ints = (np.zeros(k) for k in scoring.FIELDS.layout(r)[1])
     ints = ints.astype(np.int32)
 
     def kernel():
@@ -187,7 +187,7 @@ def table(rows: list[dict]) -> str:
             lines.append(f"| {r['n']} | {r['queue']} | | | {r['error']} | | | | | | | | |")
             continue
         sp = r["split"]
-        mc = r.get("machine_check")  # rows of older runs have none
+        mc = r.get("machine_check")  # absent or None in rows written without one
         check = f"{mc['numpy_ms']:.1f} / {mc['kernel_ms']:.2f}" if mc else ""
         lines.append(
             f"| {r['n']} | {r['queue']}{' (warm cache)' if r.get('compile_cache') == 'warm' else ''} | {r['target']} | {r['initial_vertices']} | {r['seconds']:.2f} | "

@@ -1,4 +1,4 @@
-"""Runs the research notebooks and saves their README figures as PNGs.
+"""Runs the research notebooks and saves their figures as PNGs.
 
 Each notebook in ``notebooks/`` is executed with nbclient (the committed
 notebooks stay stripped: the executed copy lives in memory only). The image

@@ -1,8 +1,9 @@
 """Grouping variable-size jobs into kernel batches of a few capacities.
 
-A job's size is a tuple of extents, rows first (``(rows, edges,
-triangles)`` for the curve kernel); a kernel's ``capacity(*totals, n_jobs)``
-maps the totals of a batch to the row capacity that fits them. A kernel's
+A job's size is ``(rows, second, third)``: its rows and the two other
+extents the kernel sizes its arrays by (edges and triangles for the curve
+kernel); a kernel's ``capacity(rows, second, third, n_jobs)`` maps the
+totals of a batch to the row capacity that fits them. A kernel's
 cost is its batch's capacity (padding rows cost about as much as real
 ones), so batches should fill their capacity and their shapes be few.
 """
@@ -20,11 +21,13 @@ CALL_ROWS = 1 << 11
 
 
 class _Bin:
-    __slots__ = ("members", "totals", "limit")
+    __slots__ = ("members", "rows", "second", "third", "limit")
 
-    def __init__(self, members, totals, limit):
+    def __init__(self, members, rows, second, third, limit):
         self.members = members
-        self.totals = totals
+        self.rows = rows
+        self.second = second
+        self.third = third
         self.limit = limit
 
 
@@ -32,10 +35,11 @@ def pack_first_fit(sizes, budget: int, capacity: Callable[..., int]) -> list[lis
     """Batches by first fit, jobs taken by decreasing rows.
 
     Args:
-      sizes: ``(rows, ...)`` extents of each job.
+      sizes: ``(rows, second, third)`` extents of each job (the kernel sizes
+        its arrays by rows and two more extents, e.g. edges and triangles).
       budget: row capacity of a batch; a job that needs more opens a batch
         of its own capacity, which smaller jobs then fill.
-      capacity: ``capacity(*totals, n_jobs) -> rows`` of the kernel.
+      capacity: ``capacity(rows, second, third, n_jobs) -> rows`` of the kernel.
 
     Returns:
       Batches as lists of job indices, each increasing; every job in exactly
@@ -44,50 +48,48 @@ def pack_first_fit(sizes, budget: int, capacity: Callable[..., int]) -> list[lis
       a job goes to the first batch with room.
 
     Example:
-      >>> pack_first_fit([(3,), (5,), (2,)], 6, lambda rows, n: rows)
+      >>> pack_first_fit([(3, 0, 0), (5, 0, 0), (2, 0, 0)], 6, lambda r, e, t, n: r)
       [[1], [0, 2]]
     """
     order = sorted(range(len(sizes)), key=lambda i: -sizes[i][0])
     bins: list[_Bin] = []
     for i in order:
-        s = sizes[i]
-        r = s[0]
+        r, e, t = sizes[i]
         for b in bins:
             # Rows bind first: skip the capacity call for batches without room.
-            if b.totals[0] + r <= b.limit:
-                totals = [x + y for x, y in zip(b.totals, s)]
-                if capacity(*totals, len(b.members) + 1) <= b.limit:
-                    b.members.append(i)
-                    b.totals = totals
-                    break
+            if b.rows + r <= b.limit and capacity(b.rows + r, b.second + e, b.third + t,
+                                                  len(b.members) + 1) <= b.limit:
+                b.members.append(i)
+                b.rows += r
+                b.second += e
+                b.third += t
+                break
         else:
-            bins.append(_Bin([i], list(s), max(budget, capacity(*s, 1))))
+            bins.append(_Bin([i], r, e, t, max(budget, capacity(r, e, t, 1))))
     return [sorted(b.members) for b in bins]
 
 
 def pack_next_fit(sizes, budget: int, capacity: Callable[..., int]) -> list[list[int]]:
     """Batches in job order, each closed when the next job does not fit it
-    (limits as in :func:`pack_first_fit`).
+    (sizes and limits as in :func:`pack_first_fit`).
 
     For many small jobs: a batch then wastes less than one job, where first
     fit would test every job against every batch.
 
     Example:
-      >>> pack_next_fit([(3,), (5,), (2,)], 6, lambda rows, n: rows)
+      >>> pack_next_fit([(3, 0, 0), (5, 0, 0), (2, 0, 0)], 6, lambda r, e, t, n: r)
       [[0], [1], [2]]
     """
     batches: list[list[int]] = []
-    totals: list[int] = []
-    limit = 0
-    for i, s in enumerate(sizes):
-        alone = capacity(*s, 1)
-        if not batches or capacity(*(x + y for x, y in zip(totals, s)), len(batches[-1]) + 1) > max(limit, alone):
+    rows = second = third = limit = 0
+    for i, (r, e, t) in enumerate(sizes):
+        alone = capacity(r, e, t, 1)
+        if not batches or capacity(rows + r, second + e, third + t, len(batches[-1]) + 1) > max(limit, alone):
             batches.append([])
-            totals = [0] * len(s)
+            rows = second = third = 0
             limit = budget
         batches[-1].append(i)
-        totals = [x + y for x, y in zip(totals, s)]
-        limit = max(limit, alone)
+        rows, second, third, limit = rows + r, second + e, third + t, max(limit, alone)
     return batches
 
 
@@ -96,8 +98,8 @@ def padded_rows(packing, sizes, capacity: Callable[..., int], shape_for: Callabl
     """Rows the kernel calls of ``packing`` pad to, plus ``call_rows`` per call."""
     total = 0
     for members in packing:
-        totals = [sum(sizes[i][k] for i in members) for k in range(len(sizes[members[0]]))]
-        total += shape_for(capacity(*totals, len(members))) + call_rows
+        r, e, t = (sum(sizes[i][k] for i in members) for k in range(3))
+        total += shape_for(capacity(r, e, t, len(members))) + call_rows
     return total
 
 
@@ -112,8 +114,8 @@ def choose_packing(sizes, budget: int, capacity: Callable[..., int], shape_for: 
     packing with the fewer padded rows (:func:`padded_rows`) is kept.
 
     Example:
-      >>> cap = lambda rows, n: max(4, 1 << (rows - 1).bit_length())
-      >>> choose_packing([(3,), (3,), (3,)], 16, cap, lambda need: need, 4)
+      >>> cap = lambda rows, e, t, n: max(4, 1 << (rows - 1).bit_length())
+      >>> choose_packing([(3, 0, 0), (3, 0, 0), (3, 0, 0)], 16, cap, lambda need: need, 4)
       [[0, 1, 2]]
     """
     small = not sizes or max(s[0] for s in sizes) <= budget // SMALL_JOB

@@ -46,7 +46,7 @@ Drivers:
   :data:`QUEUES` -- the greedy collapse loop (:mod:`otjax.decimation`) over a
   curve engine, and its queue kinds.
 - :func:`optimal_position` -- closed-form relocation (paper §3.3), applied by
-  :meth:`CurveEngine.relocate`; :func:`refine`, :func:`minimize_lbfgs` --
+  :func:`otjax.decimation.relocation.relocate`; :func:`refine`, :func:`minimize_lbfgs` --
   L-BFGS refinement on the fixed-assignment cost.
 - :func:`reconstruct_curve`, :class:`CurveResult` -- the pipeline and its
   result (also at the top level, ``otjax.reconstruct_curve``);

@@ -22,14 +22,13 @@ from typing import NamedTuple
 
 import numpy as np
 
-from otjax.batch.packing import choose_packing
 from otjax.batch.pipeline import pipelined
 from otjax.curves import scoring
-from otjax.curves.export import HostBatch, batch_of_located, export_jobs
+from otjax.curves.export import HostBatch, export_jobs, located_batches, packed_batches
 from otjax.curves.plan import Change, TransportPlan
 from otjax.curves.relocation import optimal_position
 from otjax.curves.rescoring import ChangeLog, LinkUpdates
-from otjax.curves.scorer import ROW_BUDGET, SHAPES, Scorer
+from otjax.curves.scorer import Scorer
 from otjax.curves.stencils import CandidateCost, CandidateStencil, StencilCache
 from otjax.curves.triangulation import Triangulation
 
@@ -271,51 +270,20 @@ class CurveEngine:
         self.stencils.forget(change.source)
         return change
 
-    def relocate(self, vertices, veto=None) -> tuple[set[int], int]:
-        """Moves each of ``vertices`` to its closed-form position where that
-        lowers the cost (:func:`~otjax.curves.relocation.optimal_position`).
-
-        Moves of adjacent vertices interact, so the work is done in rounds:
-        each round scores the moves of every vertex still waiting in one
-        batched call and applies the improving ones by decreasing gain,
-        skipping any whose stencil a move of this round touched (those wait
-        for the next round). Every vertex is considered once.
-
-        Returns:
-          ``(dirty, moved)``: vertices whose collapse stencils changed, and
-          how many vertices moved.
-        """
+    def movable(self, v: int) -> bool:
+        """Whether ``v`` may be moved (live, not a pinned corner)."""
         tri = self.plan.tri
-        waiting = [v for v in dict.fromkeys(vertices) if tri.alive[v] and not tri.pinned[v]]
-        dirty: set[int] = set()
-        moved = 0
-        while waiting:
-            moves = [(v, pos) for v, pos in ((v, optimal_position(self.plan, v)) for v in waiting)
-                     if pos is not None and np.all(np.isfinite(pos)) and np.any(pos != tri.xy[v])]
-            cands, delta, rows = self.score_batches(self.relocation_exports(moves))
-            if not cands:
-                break
-            blocked: set[int] = set()
-            done: set[int] = set()
-            for i in np.argsort(delta, kind="stable"):
-                c = cands[i]
-                v = c.plan.source
-                if delta[i] >= 0:
-                    done.add(v)
-                    continue
-                if v in blocked:
-                    continue
-                if veto is not None and not veto(c, rows[i]):
-                    done.add(v)
-                    continue
-                changed = self.apply(c, rows[i]).dirty
-                dirty |= changed
-                blocked |= changed
-                moved += 1
-                done.add(v)
-            proposed = {c.plan.source for c in cands}
-            waiting = [v for v in waiting if v in proposed and v not in done]
-        return dirty, moved
+        return bool(tri.alive[v]) and not tri.pinned[v]
+
+    def propose_moves(self, vertices) -> list[tuple[int, float, Scored]]:
+        """``[(vertex, delta, scored)]``: each vertex's closed-form position
+        (:func:`~otjax.curves.relocation.optimal_position`), where it moves
+        the vertex and keeps the embedding, scored in one batched call."""
+        tri = self.plan.tri
+        moves = [(v, pos) for v, pos in ((v, optimal_position(self.plan, v)) for v in vertices)
+                 if pos is not None and np.all(np.isfinite(pos)) and np.any(pos != tri.xy[v])]
+        cands, delta, costs = self.score_batches(self.relocation_exports(moves))
+        return [(c.plan.source, float(d), Scored(c, r)) for c, d, r in zip(cands, delta, costs)]
 
     # ------------------------------------------------------------ research API
     def total_cost(self) -> float:
@@ -327,40 +295,25 @@ class CurveEngine:
         """Distinct kernel shapes used (scoring and location kernels)."""
         return self.scorer.compiled_shapes
 
-    def exports(self, sources, targets: dict | None = None, budget: int = ROW_BUDGET, extra=()):
-        """Batches of the half-edges leaving ``sources`` (then the jobs
-        ``extra``), packed into few capacities (:func:`~otjax.batch.packing.choose_packing`);
-        a generator, so the next batch is exported while the kernel scores
-        the last. Each batch's ``seq`` says where its jobs stand."""
+    def exports(self, sources, targets: dict | None = None, budget: int = scoring.ROW_BUDGET, extra=()):
+        """:func:`~otjax.curves.export.packed_batches` of the half-edges
+        leaving ``sources`` (then the jobs ``extra``)."""
         jobs = itertools.chain((job for v in sources for job in self.stencils.collapse_jobs([v], targets)), extra)
-        return self._packed(jobs, budget)
+        return packed_batches(jobs, self.plan, budget)
 
-    def relocation_exports(self, moves, budget: int = ROW_BUDGET):
+    def relocation_exports(self, moves, budget: int = scoring.ROW_BUDGET):
         """:meth:`exports` for ``(v, position)`` moves (those that keep the embedding)."""
-        return self._packed(self.stencils.move_jobs(moves), budget)
-
-    def _packed(self, jobs_iter, budget: int):
-        jobs = list(jobs_iter)  # lazily, at the first batch (timed as export)
-        packing = choose_packing([job.size() for job in jobs], budget, scoring.capacity, SHAPES.shape_for,
-                                 scoring.MIN_ROWS)
-        for members in packing:
-            batch = self._export([jobs[i] for i in members], on_host=False)
-            batch.seq = np.asarray(members, np.int64)
-            yield batch
-
-    def _export(self, jobs, on_host: bool) -> HostBatch:
-        plan = self.plan
-        return export_jobs(jobs, plan.tri.xy, plan.points, plan.point_rows, on_host)
+        return packed_batches(self.stencils.move_jobs(moves), self.plan, budget)
 
     def export(self, sources, targets: dict | None = None) -> HostBatch:
         """The half-edges leaving ``sources`` as one flat batch, left for the kernel to locate."""
-        return self._export(self.stencils.collapse_jobs(sources, targets), on_host=False)
+        return export_jobs(self.stencils.collapse_jobs(sources, targets), self.plan, on_host=False)
 
     def candidates(self, sources, targets: dict | None = None) -> list[CandidateStencil]:
         """Located collapse stencils of the half-edges leaving ``sources``
         (dead, pinned and high-degree sources skipped), in source then ring
         order; half-edges that cannot be collapsed are left out."""
-        batch = self._export(self.stencils.collapse_jobs(sources, targets), on_host=True)
+        batch = export_jobs(self.stencils.collapse_jobs(sources, targets), self.plan, on_host=True)
         self.scorer.note(batch)
         return batch.cands
 
@@ -371,7 +324,7 @@ class CurveEngine:
 
     def relocation_candidates(self, moves) -> list[CandidateStencil]:
         """Located stencils of the ``(v, position)`` moves that keep the embedding."""
-        batch = self._export(list(self.stencils.move_jobs(moves)), on_host=True)
+        batch = export_jobs(list(self.stencils.move_jobs(moves)), self.plan, on_host=True)
         self.scorer.note(batch)
         return batch.cands
 
@@ -382,17 +335,8 @@ class CurveEngine:
 
     def score_candidates(self, cands: list[CandidateStencil]) -> tuple[np.ndarray, list[CandidateCost]]:
         """``(delta, costs)`` of located candidates, in batches of about
-        :data:`~otjax.curves.scorer.ROW_BUDGET` rows."""
-        chunks, run, used = [], [], 0
-        for c in cands:
-            if run and used + len(c.point_ids) > ROW_BUDGET:
-                chunks.append(run)
-                run, used = [], 0
-            run.append(c)
-            used += len(c.point_ids)
-        if run:
-            chunks.append(run)
-        _, delta, costs = self.score_batches(batch_of_located(chunk) for chunk in chunks)
+        :data:`~otjax.curves.scoring.ROW_BUDGET` rows."""
+        _, delta, costs = self.score_batches(located_batches(cands))
         return delta, costs
 
     def score_batches(self, batches):

@@ -12,10 +12,12 @@ the kernel's outputs back into one :class:`CandidateCost` per job.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
 from otjax.batch.fields import Gather, Prefix
+from otjax.batch.packing import choose_packing
 from otjax.curves import scoring
 from otjax.curves.location import MIN_PAIRS as LOCATE_MIN_PAIRS
 from otjax.curves.location import locate_pairs
@@ -116,8 +118,42 @@ def _new_triangles(jobs: list[Job], xy: np.ndarray):
     return tris, coords, tri_start
 
 
-def _local_edges(jobs: list[Job], tris: np.ndarray, tri_start: np.ndarray, xy: np.ndarray):
-    """Local edges of every job: ``(ucode, ukeys, edge_start, edge_job, edge_xy, tri_edges)``.
+class _Edges(NamedTuple):
+    """The local edges of the jobs of a batch (see :func:`_local_edges`)."""
+
+    code: np.ndarray
+    keys: np.ndarray
+    start: np.ndarray
+    job: np.ndarray
+    xy: np.ndarray
+    of_triangle: np.ndarray
+
+
+class _Rows(NamedTuple):
+    """The rows of the jobs of a batch (see :func:`_rows`)."""
+
+    point: np.ndarray
+    job: np.ndarray
+    cand: np.ndarray
+    locate: np.ndarray
+    start: np.ndarray
+    n_inside: np.ndarray
+
+
+class _Fans(NamedTuple):
+    """The fans of the jobs of a batch (see :func:`_fans`)."""
+
+    key: np.ndarray
+    tri: np.ndarray
+    job_fan: np.ndarray
+    apex: np.ndarray
+    theta: np.ndarray
+    ears: np.ndarray
+    few_ears: np.ndarray
+
+
+def _local_edges(jobs: list[Job], tris: np.ndarray, tri_start: np.ndarray, xy: np.ndarray) -> _Edges:
+    """Local edges of every job.
 
     Keys are coded job-major, so ``np.unique`` numbers every job's edges
     contiguously and in increasing key order within the job: the flat number
@@ -138,15 +174,13 @@ def _local_edges(jobs: list[Job], tris: np.ndarray, tri_start: np.ndarray, xy: n
         if job.moved is not None:
             es = slice(edge_start[j], edge_start[j + 1])
             edge_xy[es] = np.where((ukeys[es] == job.plan.source)[..., None], job.moved, edge_xy[es])
-    return ucode, ukeys, edge_start, edge_job, edge_xy, tri_edges
+    return _Edges(ucode, ukeys, edge_start, edge_job, edge_xy, tri_edges)
 
 
-def _rows(jobs: list[Job], ucode: np.ndarray, edge_start: np.ndarray, nv: int):
+def _rows(jobs: list[Job], ucode: np.ndarray, edge_start: np.ndarray, nv: int) -> _Rows:
     """Rows of every job: the points of its region, then the points across
     its link that keep their link edge (their candidate: that edge); rows
     whose edge is known (a partial update) are fixed to it.
-
-    Returns ``(row_point, row_job, row_cand, row_locate, row_start, n_in)``.
     """
     nj = len(jobs)
     n_in = np.array([len(job.region.inside) for job in jobs])
@@ -174,16 +208,14 @@ def _rows(jobs: list[Job], ucode: np.ndarray, edge_start: np.ndarray, nv: int):
             k = np.flatnonzero(job.fixed_edge >= 0)
             row_cand[row_start[j] + k] = (edge_start[j] + job.fixed_edge[k])[:, None]
             row_locate[row_start[j] + k] = False
-    return row_point, row_job, row_cand, row_locate, row_start, n_in
+    return _Rows(row_point, row_job, row_cand, row_locate, row_start, n_in)
 
 
-def _fans(jobs: list[Job], coords: np.ndarray, tri_start: np.ndarray):
+def _fans(jobs: list[Job], coords: np.ndarray, tri_start: np.ndarray) -> _Fans:
     """The new triangles of a job are its flipped-out ears, then a fan around
     one apex (the target, or the moved vertex), CCW: the fan keys the kernel
     searches and the ears it tests.
-
-    Returns ``(fan_key, fan_tri, job_fan, apex, theta, ears, few)``; ``few``:
-    whether a job's ears fit the kernel's :data:`scoring.MAX_EARS`.
+    ``few_ears``: whether a job's ears fit the kernel's :data:`scoring.MAX_EARS`.
     """
     nj = len(jobs)
     n_tri = np.diff(tri_start)
@@ -203,46 +235,47 @@ def _fans(jobs: list[Job], coords: np.ndarray, tri_start: np.ndarray):
     few = n_flip <= scoring.MAX_EARS
     ej, k = ragged_index(np.where(few, n_flip, 0))
     ears[ej, k] = tri_start[ej] + k
-    return fan_job * 8.0 + phi, fan_tri, job_fan, apex, theta, ears, few
+    return _Fans(fan_job * 8.0 + phi, fan_tri, job_fan, apex, theta, ears, few)
 
 
-def export_jobs(jobs: list[Job], xy: np.ndarray, points: np.ndarray, point_rows: np.ndarray,
-                on_host: bool) -> HostBatch:
+def export_jobs(jobs: list[Job], plan, on_host: bool) -> HostBatch:
     """The flat :class:`HostBatch` of ``jobs``.
 
     Args:
-      jobs: the jobs, against the current state.
-      xy: ``(V, 2)`` vertex positions of the triangulation.
-      points, point_rows: the plan's ``(n, 2)`` points and their ``(2, n)`` rows.
+      jobs: the jobs, against the current state of ``plan``.
+      plan: the :class:`~otjax.curves.plan.TransportPlan` (read only).
       on_host: locate every point here (exactly); otherwise only the points
         of jobs with more ears than the kernel tests.
     """
     if not jobs:
         return HostBatch.empty()
+    xy, points, point_rows = plan.tri.xy, plan.points, plan.point_rows
     nv = len(xy)
     tris, coords, tri_start = _new_triangles(jobs, xy)
-    ucode, ukeys, edge_start, edge_job, edge_xy, tri_edges = _local_edges(jobs, tris, tri_start, xy)
-    row_point, row_job, row_cand, row_locate, row_start, n_in = _rows(jobs, ucode, edge_start, nv)
-    fan_key, fan_tri, job_fan, apex, theta, ears, few = _fans(jobs, coords, tri_start)
+    edges = _local_edges(jobs, tris, tri_start, xy)
+    rows = _rows(jobs, edges.code, edges.start, nv)
+    fans = _fans(jobs, coords, tri_start)
     batch = HostBatch(
-        cands=[], row_point=row_point, row_job=row_job, row_cand=row_cand, row_locate=row_locate,
-        row_tri=np.full(len(row_point), -1, np.int64), row_start=row_start, edge_start=edge_start,
-        tri_start=tri_start, edge_xy=edge_xy, edge_job=edge_job,
-        tri_xy=np.ascontiguousarray(coords.reshape(-1, 6).T), tri_edges=tri_edges, fan_key=fan_key,
-        fan_tri=fan_tri, job_fan=job_fan, job_apex=apex, job_theta=theta, job_ears=ears,
+        cands=[], row_point=rows.point, row_job=rows.job, row_cand=rows.cand, row_locate=rows.locate,
+        row_tri=np.full(len(rows.point), -1, np.int64), row_start=rows.start, edge_start=edges.start,
+        tri_start=tri_start, edge_xy=edges.xy, edge_job=edges.job,
+        tri_xy=np.ascontiguousarray(coords.reshape(-1, 6).T), tri_edges=edges.of_triangle, fan_key=fans.key,
+        fan_tri=fans.tri, job_fan=fans.job_fan, job_apex=fans.apex, job_theta=fans.theta, job_ears=fans.ears,
         before=np.array([job.region.before for job in jobs]))
     if on_host:
         locate_on_host(batch, np.arange(len(jobs)), points, point_rows)
-    elif not few.all():
-        locate_on_host(batch, np.flatnonzero(~few), points, point_rows)
+    elif not fans.few_ears.all():
+        locate_on_host(batch, np.flatnonzero(~fans.few_ears), points, point_rows)
+    edge_start, row_start = edges.start, rows.start
     for j, job in enumerate(jobs):
         es = slice(edge_start[j], edge_start[j + 1])
         rs = slice(row_start[j], row_start[j + 1])
         cand = tri = None
         if on_host:
-            cand = row_cand[rs] - edge_start[j]
+            cand = batch.row_cand[rs] - edge_start[j]
             tri = batch.row_tri[rs]
-        batch.cands.append(CandidateStencil(job.plan, ukeys[es], edge_xy[es], row_point[rs], int(n_in[j]),
+        batch.cands.append(CandidateStencil(job.plan, edges.keys[es], edges.xy[es], rows.point[rs],
+                                            int(rows.n_inside[j]),
                                             float(batch.before[j]), job.moved, cand, tri))
     return batch
 
@@ -293,6 +326,33 @@ def locate_on_host(batch: HostBatch, jobs: np.ndarray, points: np.ndarray, point
     batch.row_locate[rows] = False
 
 
+def packed_batches(jobs, plan, budget: int = scoring.ROW_BUDGET):
+    """The jobs as batches packed into few capacities
+    (:func:`~otjax.batch.packing.choose_packing`), left for the kernel to
+    locate; a generator (the jobs are listed at the first batch), each
+    batch's ``seq`` saying where its jobs stand in ``jobs``."""
+    jobs = list(jobs)
+    packing = choose_packing([job.size() for job in jobs], budget, scoring.capacity, scoring.SHAPES.shape_for,
+                             scoring.MIN_ROWS)
+    for members in packing:
+        batch = export_jobs([jobs[i] for i in members], plan, on_host=False)
+        batch.seq = np.asarray(members, np.int64)
+        yield batch
+
+
+def located_batches(cands: list[CandidateStencil], budget: int = scoring.ROW_BUDGET):
+    """Located candidates in batches of about ``budget`` rows, in order."""
+    run, used = [], 0
+    for c in cands:
+        if run and used + len(c.point_ids) > budget:
+            yield batch_of_located(run)
+            run, used = [], 0
+        run.append(c)
+        used += len(c.point_ids)
+    if run:
+        yield batch_of_located(run)
+
+
 def batch_of_located(cands: list[CandidateStencil]) -> HostBatch:
     """A flat batch of located candidates (from an ``on_host`` export)."""
     if any(c.cand is None for c in cands):
@@ -309,18 +369,18 @@ def batch_of_located(cands: list[CandidateStencil]) -> HostBatch:
         row_tri=np.concatenate([c.triangle_of_point for c in cands]))
 
 
-def cut_outputs(batch: HostBatch, outputs: tuple) -> tuple:
+def cut_outputs(batch: HostBatch, outputs: scoring.Scores) -> scoring.Scores:
     """The kernel's host outputs cut to the batch's real jobs, edges and rows."""
-    total, per_edge, assignment, located, unresolved = outputs
     nj, ne, nr = len(batch.row_start) - 1, len(batch.edge_job), len(batch.row_point)
-    return total[:nj], per_edge[:ne], assignment[:nr], located[:nr], unresolved[:nj]
+    return scoring.Scores(outputs.total[:nj], outputs.per_edge[:ne], outputs.assignment[:nr],
+                          outputs.located[:nr], outputs.unresolved[:nj])
 
 
-def read_costs(batch: HostBatch, outputs: tuple) -> tuple[np.ndarray, list[CandidateCost]]:
+def read_costs(batch: HostBatch, outputs: scoring.Scores) -> tuple[np.ndarray, list[CandidateCost]]:
     """``(delta (J,), costs)``: each job's cost increase and its
     :class:`CandidateCost`, from the :func:`cut_outputs` of its scoring."""
-    total, per_edge, assignment, located, _ = outputs
-    delta = total - batch.before
+    per_edge, assignment, located = outputs.per_edge, outputs.assignment, outputs.located
+    delta = outputs.total - batch.before
     # Local numbering: flat edges minus the job's offset, likewise triangles.
     assignment = assignment - batch.edge_start[batch.row_job]
     triangle = np.where(batch.row_locate, located - batch.tri_start[batch.row_job], batch.row_tri)

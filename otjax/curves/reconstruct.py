@@ -21,16 +21,15 @@ from otjax.curves.plan import TransportPlan
 from otjax.curves.refinement import refine as refine_positions
 from otjax.curves.result import CurveResult
 from otjax.curves.triangulation import Triangulation
+from otjax.decimation.relocation import relocate
 from otjax.validation import check_number, check_points, check_target
 
 
-def reconstruct_curve(points, masses=None, n_vertices: int | None = None, *,
-                      tolerance: float | None = None, relevance: float = 0.0, density: float = 0.0,
-                      relocation: int = 100,
+def reconstruct_curve(points, masses=None, n_vertices: int | None = None, *, tolerance: float | None = None,
+                      relevance: float = 0.0, density: float = 0.0, relocation: int = 100,
                       final_relocations: int = 1, refine: bool = False, queue: str = "exhaustive",
                       choices: int = 15, round_fraction: float = 0.05, initial_vertices: int | None = None,
-                      seed: int = 0,
-                      merge_duplicates: bool = False, progress: bool = False) -> CurveResult:
+                      seed: int = 0, merge_duplicates: bool = False, progress: bool = False) -> CurveResult:
     """Reconstructs a curve (vertices and edges) from a weighted 2D point set.
 
     Args:
@@ -88,10 +87,32 @@ def reconstruct_curve(points, masses=None, n_vertices: int | None = None, *,
     """
     t_start = time.perf_counter()
     points, masses = check_points(points, masses, dim=2, merge_duplicates=merge_duplicates)
+    params = _check_params(len(points), n_vertices=n_vertices, tolerance=tolerance, relevance=relevance,
+                           density=density, relocation=relocation, final_relocations=final_relocations,
+                           refine=refine, queue=queue, choices=choices, round_fraction=round_fraction,
+                           initial_vertices=initial_vertices, seed=seed, merge_duplicates=merge_duplicates)
+    # Point location is exact float64 arithmetic: the whole run is in JAX's
+    # x64 mode, entered here, at the boundary, for its duration only.
+    with jax.enable_x64(True):
+        run = _run(points, masses, params, progress)
+    stats = run.stats
+    result = result_from_plan(run.engine.plan, params["relevance"], params, time.perf_counter() - t_start,
+                              params["density"])
+    result.history = {"collapses": stats.collapses, "relocations": run.relocations, "scored": stats.scored,
+                      "updated": stats.updated, "kernel_calls": stats.kernel_calls, "seconds": run.seconds,
+                      "rounds": stats.rounds, "switched_at": stats.switched_at,
+                      "compiled_shapes": run.engine.compiled_shapes,
+                      "refine": run.refined}
+    return result
+
+
+def _check_params(n_points: int, *, n_vertices, tolerance, relevance, density, relocation, final_relocations,
+                  refine, queue, choices, round_fraction, initial_vertices, seed, merge_duplicates) -> dict:
+    """The validated parameters of :func:`reconstruct_curve`, as its result's ``params``."""
     if n_vertices is None and tolerance is None:
         raise ValueError("give n_vertices (a target vertex count) or tolerance (or both)")
     if n_vertices is not None:
-        check_target(n_vertices, len(points), minimum=1)
+        check_target(n_vertices, n_points, minimum=1)
         n_vertices = int(n_vertices)
     tolerance = check_number("tolerance", tolerance, allow_none=True)
     if tolerance is not None and tolerance <= 0:
@@ -110,32 +131,21 @@ def reconstruct_curve(points, masses=None, n_vertices: int | None = None, *,
     if not 0 < round_fraction <= 1:
         raise ValueError(f"round_fraction must be in (0, 1], got {round_fraction}")
     if initial_vertices is None:
-        initial_vertices = default_initial_vertices(len(points), n_vertices)
+        initial_vertices = default_initial_vertices(n_points, n_vertices)
     initial_vertices = check_number("initial_vertices", initial_vertices, minimum=1, integer=True)
     if n_vertices is not None and initial_vertices < n_vertices:
         raise ValueError(f"initial_vertices ({initial_vertices}) must be >= n_vertices ({n_vertices})")
-    initial_vertices = min(initial_vertices, len(points))
-    params = {"n_vertices": n_vertices, "tolerance": tolerance, "relevance": relevance, "density": density,
-              "relocation": relocation, "final_relocations": final_relocations, "refine": bool(refine),
-              "queue": queue, "choices": choices, "round_fraction": round_fraction,
-              "initial_vertices": initial_vertices,
-              "seed": seed, "merge_duplicates": bool(merge_duplicates), "n_points": len(points)}
-
-    # Point location is exact float64 arithmetic: the whole run is in JAX's
-    # x64 mode, entered here, at the boundary, for its duration only.
-    with jax.enable_x64(True):
-        run = _run(points, masses, params, progress)
-    stats = run.stats
-    result = result_from_plan(run.engine.plan, relevance, params, time.perf_counter() - t_start, density)
-    result.history = {"collapses": stats.collapses, "relocations": run.relocations, "scored": stats.scored,
-                      "updated": stats.updated, "kernel_calls": stats.kernel_calls, "seconds": run.seconds,
-                      "rounds": stats.rounds, "switched_at": stats.switched_at,
-                      "compiled_shapes": run.engine.compiled_shapes,
-                      "refine": run.refined}
-    return result
+    initial_vertices = min(initial_vertices, n_points)
+    return {"n_vertices": n_vertices, "tolerance": tolerance, "relevance": relevance, "density": density,
+            "relocation": relocation, "final_relocations": final_relocations, "refine": bool(refine),
+            "queue": queue, "choices": choices, "round_fraction": round_fraction,
+            "initial_vertices": initial_vertices,
+            "seed": seed, "merge_duplicates": bool(merge_duplicates), "n_points": n_points}
 
 
 class _Outcome(NamedTuple):
+    """What the pipeline's steps leave: the engine and what they did."""
+
     engine: CurveEngine
     stats: DecimationStats
     seconds: dict
@@ -166,7 +176,7 @@ def _run(points, masses, params: dict, progress: bool) -> _Outcome:
     veto = within_tolerance(tolerance) if tolerance is not None else None
     moved = stats.relocations
     for _ in range(params["final_relocations"]):
-        _, m = engine.relocate(engine.live_sources(), veto)
+        _, m = relocate(engine, engine.live_sources(), veto)
         moved += m
         if m == 0:
             break

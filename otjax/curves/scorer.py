@@ -11,14 +11,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from otjax.batch.pipeline import Handle, KernelPipeline, ShapePolicy, pipelined
+from otjax.batch.pipeline import Handle, KernelPipeline, pipelined
 from otjax.curves import scoring
 from otjax.curves.export import HostBatch, cut_outputs, locate_on_host, read_costs
 from otjax.curves.stencils import CandidateCost
 
-# Rows per kernel call in the decimation loop (docs/decisions.md#row_budget).
-ROW_BUDGET = 1 << 15
-SHAPES = ShapePolicy(scoring.MIN_ROWS, ROW_BUDGET)
 
 
 class Scorer:
@@ -35,7 +32,7 @@ class Scorer:
         self.points = points
         self.mass = mass
         self.point_rows = np.ascontiguousarray(points.T)
-        self.pipeline = KernelPipeline(scoring.FIELDS, scoring.score_packed, SHAPES, dtype)
+        self.pipeline = KernelPipeline(scoring.FIELDS, scoring.score_packed, scoring.SHAPES, dtype)
         self.location_kernel_used = False
 
     @property
@@ -72,7 +69,7 @@ class Scorer:
         if handle is None:
             return np.zeros(0), []
         outputs = self._wait(batch, handle)
-        bad = np.flatnonzero(outputs[4])
+        bad = np.flatnonzero(outputs.unresolved)
         if len(bad):
             locate_on_host(batch, bad, self.points, self.point_rows)
             self.note(batch)
@@ -102,7 +99,7 @@ class Scorer:
         order = np.argsort(np.concatenate(seqs), kind="stable")
         return [cands[i] for i in order], delta[order], [costs[i] for i in order]
 
-    def edge_costs(self, parts, edge_xy: np.ndarray, budget: int = ROW_BUDGET) -> np.ndarray:
+    def edge_costs(self, parts, edge_xy: np.ndarray, budget: int = scoring.ROW_BUDGET) -> np.ndarray:
         """Costs of edges given with their points.
 
         Args:
@@ -131,6 +128,6 @@ class Scorer:
                 first = last
 
         out = [np.zeros((0, 6))]
-        pipelined(batches(), self.dispatch, lambda batch, handle: out.append(self._wait(batch, handle)[1]),
+        pipelined(batches(), self.dispatch, lambda batch, handle: out.append(self._wait(batch, handle).per_edge),
                   in_flight=1)
         return np.concatenate(out)

@@ -37,6 +37,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from otjax.batch.fields import Field, FieldSpec
+from otjax.batch.pipeline import ShapePolicy
 from otjax.curves.cost import stencil_cost
 from otjax.curves.location import INSIDE, in_triangle_rows
 from otjax.stencil import EdgeStencil
@@ -46,6 +47,10 @@ EDGE_FIELDS = ("edge_cost", "normal", "tangential", "vertex", "edge_mass", "soli
 # Smallest row capacity; every other capacity is a fixed fraction of it, so
 # that one number (see capacity) names a compiled shape.
 MIN_ROWS = 1 << 12
+# Rows per kernel call in the decimation loop (docs/decisions.md#row_budget).
+ROW_BUDGET = 1 << 15
+# The compiled shapes: MIN_ROWS and ROW_BUDGET, above that a capacity class.
+SHAPES = ShapePolicy(MIN_ROWS, ROW_BUDGET)
 EDGES_PER_ROW = 4  # E = T = R / 4
 JOBS_PER_ROW = 16  # J = R / 16
 RETRY_PER_ROW = 4  # rows whose guess fails: at most R / 4 get the second test
@@ -244,6 +249,25 @@ def _locate(batch: FlatBatch, px, py, need, retry_per_row: int = RETRY_PER_ROW):
     return loc
 
 
+class Scores(NamedTuple):
+    """What :func:`score_flat` returns (a pytree).
+
+    Attributes:
+      total: ``(J,)`` each job's cost after the change.
+      per_edge: ``(E, 6)`` per edge, the fields :data:`EDGE_FIELDS`.
+      assignment: ``(R,)`` each row's flat edge (``-1`` on padding).
+      located: ``(R,)`` each located row's flat triangle (``-1`` elsewhere).
+      unresolved: ``(J,)`` per job, how many of its rows the kernel could not
+        locate (its costs are then meaningless).
+    """
+
+    total: jax.Array
+    per_edge: jax.Array
+    assignment: jax.Array
+    located: jax.Array
+    unresolved: jax.Array
+
+
 @functools.partial(jax.jit, static_argnames=("dtype", "retry_per_row"))
 def score_flat(batch: FlatBatch, dtype=jnp.float64, retry_per_row: int = RETRY_PER_ROW):
     """Locates, assigns and costs a flat batch; see the module docstring.
@@ -255,12 +279,7 @@ def score_flat(batch: FlatBatch, dtype=jnp.float64, retry_per_row: int = RETRY_P
         the rows whose guess failed (tests set it high to force rounds).
 
     Returns:
-      ``(total (J,), per_edge (E, 6), assignment (R,), located (R,),
-      unresolved (J,))``: each job's cost after the change; per edge, the
-      fields ``EDGE_FIELDS`` of :class:`~otjax.curves.cost.StencilCost`;
-      each row's flat edge (``-1`` on padding); each located row's flat
-      triangle (``-1`` elsewhere); and per job, how many of its rows the
-      kernel could not locate (its costs are then meaningless).
+      :class:`Scores`.
     """
     p = batch.row_xy
     px, py = p[:, 0], p[:, 1]
@@ -275,7 +294,7 @@ def score_flat(batch: FlatBatch, dtype=jnp.float64, retry_per_row: int = RETRY_P
     total = jax.ops.segment_sum(res.edge_cost, batch.edge_job, num_segments=n_jobs)
     per_edge = jnp.stack([getattr(res, k).astype(dtype) for k in EDGE_FIELDS], -1)
     bad = jax.ops.segment_sum(unresolved.astype(jnp.int32), batch.row_job, num_segments=n_jobs)
-    return total, per_edge, res.assignment, loc, bad
+    return Scores(total, per_edge, res.assignment, loc, bad)
 
 
 @functools.partial(jax.jit, static_argnames=("rows", "dtype"))

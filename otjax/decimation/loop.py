@@ -30,6 +30,7 @@ from typing import Callable, Protocol, Sequence
 
 import numpy as np
 
+from otjax.decimation.relocation import relocate as relocate_rounds
 from otjax.decimation.sampling import IndependentSet, LiveVertices, lock_set, sample_half_edges
 from otjax.decimation.score_table import ScoreTable
 
@@ -47,7 +48,8 @@ class Engine(Protocol):
     half-edges leaving ``v``. ``score`` returns ``[(half-edge, delta)]`` of
     the admissible ones; ``take`` returns opaque scored candidates that
     ``apply(*taken)`` applies, returning a change with ``dirty`` (vertices to
-    score again) and ``ring`` (the source's one-ring).
+    score again) and ``ring`` (the source's one-ring). ``propose_moves``
+    returns ``[(vertex, delta, scored)]`` for :func:`otjax.decimation.relocation.relocate`.
     """
 
     versions: Sequence[int]
@@ -59,7 +61,8 @@ class Engine(Protocol):
     def score(self, sources, targets=None, *, veto=None, keep=True, while_waiting=None) -> list: ...
     def take(self, keys) -> list: ...
     def apply(self, *taken): ...
-    def relocate(self, vertices, veto=None) -> tuple[set, int]: ...
+    def movable(self, v: int) -> bool: ...
+    def propose_moves(self, vertices) -> list: ...
     def prefetch(self, half_edges) -> None: ...
     def stats(self) -> dict: ...
 
@@ -144,7 +147,7 @@ def score(run: Run, sources, targets=None, *, keep: bool = True, while_waiting=N
 def relocate(run: Run, vertices) -> set[int]:
     """Relocates ``vertices`` (the live ones); returns the vertices it made dirty."""
     t0 = time.perf_counter()
-    dirty, moved = run.engine.relocate(sorted(v for v in vertices if v in run.live), run.veto)
+    dirty, moved = relocate_rounds(run.engine, sorted(v for v in vertices if v in run.live), run.veto)
     run.stats.relocations += moved
     run.stats.seconds["relocate"] += time.perf_counter() - t0
     return set(dirty)
