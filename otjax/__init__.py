@@ -10,12 +10,17 @@ Public API (2D curves):
 - :mod:`otjax.curves` -- the building blocks of the 2D pipeline (triangulation,
   transport plan, stencil batches, JAX cost kernels, decimation, relocation),
   for research code; see ``notebooks/``.
-- :mod:`otjax.stencil` -- padded stencil batches shared by the kernels.
+- :mod:`otjax.decimation` -- the greedy loop shared by every dimension
+  (queues, relocation rounds) over an engine such as
+  :class:`otjax.curves.CurveEngine`.
+- :mod:`otjax.batch` -- kernel batches shared by every dimension: field
+  specs, packing, the dispatch pipeline.
+- :mod:`otjax.stencil` -- padded stencil batches of the public batched kernel.
 - :func:`enable_compilation_cache` -- keep compiled kernels on disk for
   later processes (the command line does by default).
 """
 
-from otjax import curves, datasets, metrics, stencil
+from otjax import batch, curves, datasets, decimation, metrics, stencil
 from otjax.compile_cache import enable_compilation_cache
 from otjax.curves.reconstruct import reconstruct_curve
 from otjax.curves.result import CurveResult
@@ -23,8 +28,10 @@ from otjax.io import image_to_points, read_points
 
 __all__ = [
     "CurveResult",
+    "batch",
     "curves",
     "datasets",
+    "decimation",
     "enable_compilation_cache",
     "image_to_points",
     "metrics",
