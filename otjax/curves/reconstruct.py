@@ -47,7 +47,7 @@ def reconstruct_curve(points, masses=None, n_vertices: int | None = None, *, tol
         is at least this fraction (in ``[0, 1]``) of the largest one. Not in
         the paper: its relevance does not depend on density at all (``M_e``
         cancels against ``N_e + T_e``), so it cannot tell a sparse outlier
-        edge from a dense one on the shape; see the README.
+        edge from a dense one on the shape (docs/benchmarks.md#outliers-relevance-against-density).
       relocation: relocate the vertices of the modified one-ring after each
         of the last ``relocation`` collapses (paper: 100); ``0`` disables.
         Ignored in pure tolerance mode, where the end is not known ahead.
@@ -59,9 +59,10 @@ def reconstruct_curve(points, masses=None, n_vertices: int | None = None, *, tol
         half-edges per step, exhaustive below 5x the target) or
         ``"parallel"`` (independent sets of cheap collapses per round; not
         in the paper). See :func:`otjax.curves.decimate.decimate`.
-      choices: half-edges drawn per multiple-choice step (paper: 15).
+      choices: half-edges drawn per multiple-choice step (paper: typically 10;
+        docs/decisions.md#choices).
       round_fraction: parallel queue: a round collapses at most this
-        fraction of the collapses still to do (README: rounds vs cost).
+        fraction of the collapses still to do (docs/decisions.md#round_fraction).
       initial_vertices: size of the random subset of the points that
         becomes the initial triangulation (paper §3.5); every point still
         carries its mass. ``None``: :func:`default_initial_vertices`.
@@ -197,12 +198,10 @@ def default_initial_vertices(n_points: int, n_vertices: int | None) -> int:
     """Initial vertex count used when ``initial_vertices`` is not given.
 
     Every point up to 4000 points; above, a random subset of 2000 points or
-    20 per target vertex, whichever is more. Measured on 50k points (noisy
-    star with 10% outliers, 10 target vertices, multiple-choice queue):
-    1000 / 2000 / 4000 initial vertices took 33 / 35 / 44 s for final costs
-    961 / 1041 / 954 (one seed each): the end of the run, where stencils
-    hold thousands of points, dominates, and a larger subset mostly adds
-    collapses. Tolerance mode (no target) uses the floor of 2000.
+    20 per target vertex, whichever is more: the end of a run, where
+    stencils hold thousands of points, dominates its time, and a larger
+    subset mostly adds collapses (docs/decisions.md#default_initial_vertices).
+    Tolerance mode (no target) uses the floor of 2000.
     """
     if n_points <= 4000:
         return n_points
