@@ -1,11 +1,12 @@
 """Reading point sets (text files, grayscale images) and writing files atomically.
 
-Text formats (``.xy``, ``.xyz``, ``.csv``, ``.txt``): one point per line, the
-numbers separated by whitespace or commas; ``#`` starts a comment; blank lines
-are skipped; a ``.csv`` may start with one non-numeric header line. Two
-columns are ``x y``; three are ``x y mass`` (in this 2D library ``.xyz`` means
-``x y mass``, not 3D coordinates). Every data row has the same number of
-columns.
+Text formats (``.xy``, ``.xyz``, ``.xym``, ``.csv``, ``.txt``): one point per
+line, the numbers separated by whitespace or commas; ``#`` starts a comment;
+blank lines are skipped; a ``.csv`` may start with one non-numeric header
+line. Two columns are ``x y``; three are ``x y mass`` (in this 2D library
+``.xyz`` means ``x y mass``, not 3D coordinates; ``.xym`` is the weighted
+point format of CGAL's curve reconstruction demo, ``x y mass`` per line).
+Every data row has the same number of columns.
 
 Images (``.png``, ``.jpg``, ``.jpeg``, ``.pgm``, ``.bmp``, ``.tif``,
 ``.tiff``): every pixel becomes a point at its centre, weighted by its
@@ -25,7 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
-TEXT_EXTENSIONS = (".xy", ".xyz", ".csv", ".txt")
+TEXT_EXTENSIONS = (".xy", ".xyz", ".xym", ".csv", ".txt")
 IMAGE_EXTENSIONS = (".png", ".jpg", ".jpeg", ".pgm", ".bmp", ".tif", ".tiff")
 
 # Rec. 601 luma weights, the ones Pillow uses for its "L" conversion.

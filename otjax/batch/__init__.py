@@ -9,11 +9,12 @@
   shapes.
 """
 
-from otjax.batch.fields import Field, FieldSpec, Gather, PackedBuffers, Prefix
+from otjax.batch.fields import Dims, Field, FieldSpec, Gather, PackedBuffers, Prefix
 from otjax.batch.packing import choose_packing, pack_first_fit, pack_next_fit
 from otjax.batch.pipeline import Handle, KernelPipeline, ShapePolicy, require_x64
 
 __all__ = [
+    "Dims",
     "Field",
     "FieldSpec",
     "Gather",

@@ -18,22 +18,42 @@ import numpy as np
 KINDS = ("float", "int", "bool")
 
 
+class Dims(NamedTuple):
+    """A field's shape at row capacity ``r``: ``(*head, r // per + plus, *tail)``.
+
+    The middle axis is the one a batch fills from its start. A plain value
+    rather than a closure, so that specs (and buffers) pickle.
+    """
+
+    per: int = 1
+    plus: int = 0
+    head: tuple[int, ...] = ()
+    tail: tuple[int, ...] = ()
+
+    def __call__(self, r: int) -> tuple[int, ...]:
+        return (*self.head, r // self.per + self.plus, *self.tail)
+
+
 class Field(NamedTuple):
     """One input array of a kernel.
 
     Attributes:
       name: the field's name (the kernel's container attribute).
       kind: ``"float"`` (float64 buffer), ``"int"`` or ``"bool"`` (int32 buffer).
-      shape: ``r -> shape`` at row capacity ``r``.
-      pad: value of the entries no batch wrote; a number or ``r -> number``.
-      axis: the axis a batch fills from its start (the others are whole).
+      dims: its :class:`Dims`.
+      pad: value of the entries no batch wrote; a number or ``r -> number``
+        (a module-level function, so that specs pickle).
     """
 
     name: str
     kind: str
-    shape: Callable[[int], tuple[int, ...]]
+    dims: Dims
     pad: float | Callable[[int], float] = 0
-    axis: int = 0
+
+    @property
+    def axis(self) -> int:
+        """The axis a batch fills from its start."""
+        return len(self.dims.head)
 
     def pad_at(self, r: int):
         return self.pad(r) if callable(self.pad) else self.pad
@@ -85,7 +105,7 @@ class FieldSpec:
         if hit is None:
             places, offsets = {}, {True: 0, False: 0}
             for f in self.fields:
-                shape = tuple(int(s) for s in f.shape(r))
+                shape = tuple(int(s) for s in f.dims(r))
                 is_float = f.kind == "float"
                 places[f.name] = Place(is_float, offsets[is_float], shape)
                 offsets[is_float] += int(np.prod(shape))
@@ -181,8 +201,11 @@ class PackedBuffers:
                 view[n:used] = self._pads[name]
             self._used[name] = n
             if isinstance(value, Gather):
-                # mode="clip" lets take write straight into the view (ids are valid).
-                np.take(value.source, value.index, axis=0, out=view[:n], mode="clip")
+                if value.source.dtype == view.dtype:
+                    # mode="clip" lets take write straight into the view (ids are valid).
+                    np.take(value.source, value.index, axis=0, out=view[:n], mode="clip")
+                else:
+                    view[:n] = value.source[value.index]
             elif isinstance(value, Prefix):
                 view[:n] = value.value
             elif n:

@@ -10,6 +10,8 @@ call while the host exports the next batch.
 
 from __future__ import annotations
 
+import functools
+import importlib
 from typing import Callable, NamedTuple
 
 import jax
@@ -80,6 +82,18 @@ class KernelPipeline:
         self.calls = 0
         self.shapes_seen: set[int] = set()
         self._pool: dict[int, list[PackedBuffers]] = {}
+
+    def __getstate__(self) -> dict:
+        # A jitted kernel pickles by the module and name it was defined with.
+        state = dict(self.__dict__)
+        state["kernel"] = (self.kernel.__module__, self.kernel.__qualname__)
+        state["_pool"] = {}
+        return state
+
+    def __setstate__(self, state: dict) -> None:
+        module, name = state["kernel"]
+        state["kernel"] = functools.reduce(getattr, name.split("."), importlib.import_module(module))
+        self.__dict__.update(state)
 
     def dispatch(self, values: dict, need: int) -> Handle:
         """Packs ``values`` (see :meth:`PackedBuffers.fill`) at the shape for

@@ -124,7 +124,8 @@ def refine(engine: CurveEngine, maxiter: int = 100, max_halvings: int = 6) -> tu
             step /= 2
             continue
         new = CurveEngine(tri, plan.points, plan.mass, dtype=engine.scorer.pipeline.dtype,
-                          max_source_degree=engine.degree_bound, incremental=engine.incremental)
+                          max_source_degree=engine.degree_bound, incremental=engine.incremental,
+                          update_min_rows=engine.update_min_rows)
         after = new.total_cost()
         if after < before:
             info.update(accepted=True, cost_after=after, step=step)

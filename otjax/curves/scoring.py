@@ -36,7 +36,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from otjax.batch.fields import Field, FieldSpec
+from otjax.batch.fields import Dims, Field, FieldSpec
 from otjax.batch.pipeline import ShapePolicy
 from otjax.curves.cost import stencil_cost
 from otjax.curves.location import INSIDE, in_triangle_rows
@@ -141,35 +141,27 @@ def _pad_job(r: int) -> int:
     return r // JOBS_PER_ROW - 1
 
 
-def _e(r: int) -> int:
-    return r // EDGES_PER_ROW
-
-
-def _j(r: int) -> int:
-    return r // JOBS_PER_ROW
-
-
 # The layout of a packed :class:`FlatBatch`, written once: field order, dtype
 # kind, shape at row capacity ``r``, pad value (padding rows and edges belong
 # to the last job, which no batch uses), and the axis a batch fills.
 FIELDS = FieldSpec([
-    Field("row_xy", "float", lambda r: (r, 2)),
-    Field("row_mass", "float", lambda r: (r,)),
-    Field("row_job", "int", lambda r: (r,), pad=_pad_job),
-    Field("row_cand", "int", lambda r: (r, 3)),
-    Field("row_locate", "bool", lambda r: (r,)),
-    Field("row_valid", "bool", lambda r: (r,)),
-    Field("tri_xy", "float", lambda r: (6, _e(r)), axis=1),
-    Field("tri_edges", "int", lambda r: (_e(r), 3)),
-    Field("fan_key", "float", lambda r: (_e(r),), pad=np.inf),
-    Field("fan_tri", "int", lambda r: (_e(r),)),
-    Field("job_fan", "int", lambda r: (_j(r) + 1,)),
-    Field("job_apex", "float", lambda r: (_j(r), 2)),
-    Field("job_theta", "float", lambda r: (_j(r),)),
-    Field("job_ears", "int", lambda r: (_j(r), MAX_EARS), pad=-1),
-    Field("edge_xy", "float", lambda r: (_e(r), 2, 2)),
-    Field("edge_valid", "bool", lambda r: (_e(r),)),
-    Field("edge_job", "int", lambda r: (_e(r),), pad=_pad_job),
+    Field("row_xy", "float", Dims(tail=(2,))),
+    Field("row_mass", "float", Dims()),
+    Field("row_job", "int", Dims(), pad=_pad_job),
+    Field("row_cand", "int", Dims(tail=(3,))),
+    Field("row_locate", "bool", Dims()),
+    Field("row_valid", "bool", Dims()),
+    Field("tri_xy", "float", Dims(EDGES_PER_ROW, head=(6,))),
+    Field("tri_edges", "int", Dims(EDGES_PER_ROW, tail=(3,))),
+    Field("fan_key", "float", Dims(EDGES_PER_ROW), pad=np.inf),
+    Field("fan_tri", "int", Dims(EDGES_PER_ROW)),
+    Field("job_fan", "int", Dims(JOBS_PER_ROW, plus=1)),
+    Field("job_apex", "float", Dims(JOBS_PER_ROW, tail=(2,))),
+    Field("job_theta", "float", Dims(JOBS_PER_ROW)),
+    Field("job_ears", "int", Dims(JOBS_PER_ROW, tail=(MAX_EARS,)), pad=-1),
+    Field("edge_xy", "float", Dims(EDGES_PER_ROW, tail=(2, 2))),
+    Field("edge_valid", "bool", Dims(EDGES_PER_ROW)),
+    Field("edge_job", "int", Dims(EDGES_PER_ROW), pad=_pad_job),
 ])
 assert tuple(f.name for f in FIELDS.fields) == FlatBatch._fields
 

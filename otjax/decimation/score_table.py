@@ -29,10 +29,13 @@ class ScoreTable:
 
     def __init__(self, versions: Sequence[int], tie_rng: np.random.Generator | None = None):
         self.versions = versions
-        self.entries: dict[Key, tuple[float, int]] = {}  # key -> (delta, version)
+        self.entries: dict[Key, tuple[float, int, int]] = {}  # key -> (delta, version, stamp)
         self.heap: list = []
         self.use_heap = False
         self._tie = itertools.count() if tie_rng is None else iter(lambda: float(tie_rng.random()), None)
+        # Each entry's stamp: a heap item of an entry replaced at the same
+        # version is stale too.
+        self._stamp = itertools.count()
 
     def fresh(self, key: Key) -> bool:
         """Whether ``key`` has a score at its source's current version."""
@@ -46,24 +49,25 @@ class ScoreTable:
     def enter(self, scored, order: Callable[[Key], tuple]) -> None:
         """Enters ``[(key, delta)]`` at the current versions; with the heap in
         use, pushes them in ``order`` (which decides exact ties)."""
-        versions = self.versions
+        versions, stamp = self.versions, self._stamp
         for key, delta in scored:
-            self.entries[key] = (delta, versions[key[0]])
+            self.entries[key] = (delta, versions[key[0]], next(stamp))
         if self.use_heap:
             for key in sorted((key for key, _ in scored), key=order):
                 self.push(key)
 
     def push(self, key: Key) -> None:
-        delta, ver = self.entries[key]
-        heapq.heappush(self.heap, (delta, next(self._tie), key, ver))
+        """Puts ``key`` on the heap at its current score."""
+        delta, ver, stamp = self.entries[key]
+        heapq.heappush(self.heap, (delta, next(self._tie), key, ver, stamp))
 
     def pop(self, live: Callable[[int], bool]) -> Key | None:
         """The cheapest fresh entry whose source is ``live`` (removed from the
         heap), or ``None``."""
         while self.heap:
-            _, _, key, ver = heapq.heappop(self.heap)
+            _, _, key, ver, stamp = heapq.heappop(self.heap)
             entry = self.entries.get(key)
-            if entry is None or entry[1] != ver or ver != self.versions[key[0]]:
+            if entry is None or entry[2] != stamp or ver != self.versions[key[0]]:
                 continue
             if not live(key[0]):
                 continue

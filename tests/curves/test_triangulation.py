@@ -5,7 +5,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from otjax.curves.predicates import orient, orient_perturbed
+from otjax.predicates import orient, orient_perturbed
 from otjax.curves.triangulation import Triangulation
 from tests.point_sets import make_points, point_sets
 

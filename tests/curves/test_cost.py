@@ -382,3 +382,19 @@ def test_gradient_matches_finite_differences():
         for n, (i, j) in enumerate(probes):
             fd = (totals[2 * n][method].total[0] - totals[2 * n + 1][method].total[0]) / (2 * h)
             np.testing.assert_allclose(g[0, i, j], fd, rtol=1e-5, atol=1e-8)
+
+
+@settings(max_examples=60, deadline=None)
+@given(data=st.data())
+def test_sort_order_equals_lexsort_with_near_ties(data):
+    """The quantised one-sort path (with its exact fallback) vs np.lexsort."""
+    n = data.draw(st.integers(2, 300))
+    rng = np.random.default_rng(data.draw(st.integers(0, 2**31)))
+    edge = rng.integers(0, data.draw(st.integers(1, 8)), n).astype(np.int32)
+    base = rng.choice([-1.0, 0.0, 0.3, 1e-300, 2.5], n) if data.draw(st.booleans()) else rng.random(n)
+    # Neighbouring floats: far below any quantisation step.
+    t = base + np.where(rng.random(n) < 0.5, 0.0, np.spacing(base) * rng.integers(-3, 4, n))
+    t[rng.random(n) < 0.1] = -0.0
+    with jax.enable_x64(True):
+        got = np.asarray(jax.jit(cost.sort_order, static_argnums=2)(edge, t, 8))
+    np.testing.assert_array_equal(got, np.lexsort((np.arange(n), np.where(t == 0, 0.0, t), edge)))

@@ -1,0 +1,54 @@
+"""The filtered JAX point location against the exact host predicate."""
+
+import numpy as np
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from otjax.curves.location import CHUNK, locate_pairs
+from otjax.curves.triangulation import Triangulation
+from otjax.predicates import in_triangle_perturbed
+from tests.point_sets import make_points
+
+
+def rows(tri: np.ndarray, p: np.ndarray):
+    """``(N, 3, 2)``, ``(N, 2)`` -> the planar layout of :func:`locate_pairs`."""
+    return np.ascontiguousarray(tri.reshape(-1, 6).T), np.ascontiguousarray(p.T)
+
+
+def all_pairs(tri: Triangulation, queries: np.ndarray):
+    t = tri.xy[tri.triangles()]
+    i, j = np.meshgrid(np.arange(len(queries)), np.arange(len(t)), indexing="ij")
+    return t[j.ravel()], queries[i.ravel()]
+
+
+@settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(kind=st.sampled_from(["uniform", "near_collinear", "clustered", "duplicates", "grid"]),
+       n=st.integers(8, 60), seed=st.integers(0, 10_000))
+def test_filtered_location_equals_the_exact_predicate(kind, n, seed):
+    rng = np.random.default_rng(seed)
+    pts = make_points(kind, n, seed)
+    tri = Triangulation(np.unique(pts, axis=0))
+    # Queries on vertices, on edge midpoints (often inexact), at random.
+    t = tri.triangles()
+    mid = (tri.xy[t[:, 0]] + tri.xy[t[:, 1]]) / 2
+    inner = tri.xy[tri.alive & ~tri.pinned]
+    span = float(np.ptp(inner, axis=0).max()) or 1.0  # the box is relative to the data
+    queries = np.concatenate([inner, mid, pts + 1e-3 * span * rng.standard_normal(pts.shape)])
+    a, p = all_pairs(tri, queries)
+    want = in_triangle_perturbed(a, p)
+    got = locate_pairs(*rows(a, p))
+    np.testing.assert_array_equal(got, want)
+    # Each query is in exactly one triangle.
+    assert np.all(got.reshape(len(queries), -1).sum(1) == 1)
+
+
+def test_filtered_location_over_chunk_boundaries():
+    rng = np.random.default_rng(1)
+    n = 5 * CHUNK + 12_345  # several chunks, the last one padded
+    a = rng.random((n, 3, 2))
+    u, v = a[:, 1] - a[:, 0], a[:, 2] - a[:, 0]
+    flip = u[:, 0] * v[:, 1] - u[:, 1] * v[:, 0] < 0
+    a[flip] = a[flip][:, [0, 2, 1]]
+    p = rng.random((n, 2))
+    p[::7] = a[::7, 1]  # exactly on a corner: the perturbation decides
+    np.testing.assert_array_equal(locate_pairs(*rows(a, p)), in_triangle_perturbed(a, p))

@@ -1,0 +1,136 @@
+"""Re-scoring only what changed: the change log's versions and link changes,
+link updates and partial updates against full re-scorings.
+
+The stencils of these small cases are below the size that makes an update
+worth it (``update_min_rows``); the properties under test hold for any
+threshold, so the engines here update everything (``update_min_rows=0``).
+"""
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from otjax.curves.decimate import decimate
+from otjax.curves.engine import CurveEngine
+from otjax.curves.triangulation import Triangulation
+from tests.curves.helpers import check_scratch, make_engine, noisy_shape, run_queue
+
+
+def link_of(tri, v):
+    ring = tri.star(v)[0]
+    return {tuple(sorted((ring[k], ring[(k + 1) % len(ring)]))) for k in range(len(ring))}
+
+
+@settings(max_examples=12, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(queue=st.sampled_from(["exhaustive", "parallel"]), n=st.integers(60, 220), seed=st.integers(0, 10_000),
+       subset=st.sampled_from([0.5, 1.0]))
+def test_link_updates_make_the_same_greedy_as_full_rescoring(queue, n, seed, subset):
+    def engine(incremental):
+        rng = np.random.default_rng(seed)
+        pts = noisy_shape(rng, n)
+        mass = rng.uniform(0.2, 2.0, n)
+        keep = rng.random(n) < subset
+        tri = Triangulation(np.unique(pts[keep], axis=0) if subset < 1 else pts)
+        return CurveEngine(tri, pts, mass, incremental=incremental, update_min_rows=0)
+
+    full, full_stats = run_queue(engine(False), queue)
+    updated, stats_ = run_queue(engine(True), queue)
+    # The same changes in the same order: every score, exact ties included,
+    # is the same as a full re-scoring's.
+    assert updated == full
+    assert full_stats.updated == 0 < stats_.updated
+    assert full_stats.partial == 0 < stats_.partial
+    assert stats_.scored < full_stats.scored
+
+
+@pytest.mark.parametrize("seed", [12, 13])
+def test_each_link_update_equals_a_full_scoring(seed):
+    rng = np.random.default_rng(seed)
+    pts = noisy_shape(rng, 500)
+    mass = rng.uniform(0.5, 2.0, len(pts))
+    engine = CurveEngine(Triangulation(pts[::2]), pts, mass, update_min_rows=0)
+    tri = engine.plan.tri
+    checked = []
+    finish_links = engine.links.finish_links
+
+    def checking(items, parts, costs):
+        out = finish_links(items, parts, costs)
+        for (rec, changed), (new, delta) in zip(items, out):
+            v, w = rec.plan.source, rec.plan.target
+            # The star kept its triangles; what changed lies on its link.
+            assert changed and changed <= link_of(tri, v)
+            cands = engine.candidates([v], {v: [w]})  # located on the host: another path
+            _, (cost,) = engine.score_candidates(cands)
+            np.testing.assert_array_equal(new.keys, cands[0].keys)
+            np.testing.assert_allclose(new.edge_cost, cost.edge_cost, rtol=1e-12, atol=1e-15)
+            assert delta == pytest.approx(cost.delta, rel=1e-12, abs=1e-14)
+            checked.append(delta)
+        return out
+
+    engine.links.finish_links = checking
+    stats_ = decimate(engine, 10, queue="exhaustive", relocation=20)
+    assert stats_.updated == len(checked) > 100
+    tri.check()
+    assert engine.total_cost() == pytest.approx(check_scratch(engine), rel=1e-9)
+
+
+@pytest.mark.parametrize("seed", [12, 16])
+def test_each_partial_update_equals_a_full_scoring(seed):
+    """After a ring vertex moved, the collapse re-scored on the part the move
+    reaches has the full kernel scoring's edge costs bit for bit, and its
+    record the full scoring's triangle and edge of every point."""
+    rng = np.random.default_rng(seed)
+    pts = noisy_shape(rng, 500)
+    mass = rng.uniform(0.5, 2.0, len(pts))
+    engine = CurveEngine(Triangulation(pts[::2]), pts, mass, update_min_rows=0)
+    checked, smaller = [], []
+    finish = engine.links.finish_partial
+
+    def checking(pending, cand, scored):
+        rec, delta = finish(pending, cand, scored)
+        v, w = rec.plan.source, rec.plan.target
+        rows = len(rec.inside) + len(engine.stencils.region(v).outside)
+        assert len(cand.point_ids) <= rows
+        smaller.append(len(cand.point_ids) < rows)
+        _, full_delta, (cost,) = engine.score_batches(engine.exports([v], {v: [w]}))
+        np.testing.assert_array_equal(rec.edge_cost, cost.edge_cost)
+        n = len(rec.inside)
+        np.testing.assert_array_equal(rec.triangle, cost.triangle[:n])
+        np.testing.assert_array_equal(rec.edge, cost.assignment[:n])
+        assert delta == pytest.approx(full_delta[0], rel=1e-12, abs=1e-14)
+        checked.append(delta)
+        return rec, delta
+
+    engine.links.finish_partial = checking
+    stats_ = decimate(engine, 10, queue="exhaustive", relocation=40)
+    assert stats_.partial == len(checked) > 50
+    assert sum(smaller) > len(smaller) / 2  # most are a part of the stencil only
+    engine.plan.tri.check()
+    assert engine.total_cost() == pytest.approx(check_scratch(engine), rel=1e-9)
+
+
+def test_changed_links_reports_star_changes_as_none():
+    rng = np.random.default_rng(14)
+    engine = make_engine(rng, n=200)
+    tri = engine.plan.tri
+    version = list(engine.log.version)
+    stars = {v: tri.star(v) for v in range(len(tri.xy)) if tri.alive[v] and not tri.pinned[v]}
+    s, t = next((s, t) for s, t in tri.half_edges() if engine.candidate(s, t) is not None)
+    cand = engine.candidate(s, t)
+    _, (cost,) = engine.score_candidates([cand])
+    dirty = engine.apply(cand, cost).dirty
+    for v in dirty:
+        changed = engine.log.changed_links(v, version[v])
+        if v in cand.plan.ring:
+            assert changed is None
+        else:
+            assert tri.star(v) == stars[v]  # same ring, same faces
+            assert changed and changed <= link_of(tri, v)
+            assert engine.log.changed_links(v, engine.log.version[v]) == set()
+    for v in set(stars) - dirty - {s}:
+        assert tri.star(v) == stars[v]
+    # The loop reads the same versions: what the change touched moved on.
+    assert engine.versions is engine.log.version
+    assert all(engine.versions[v] > version[v] for v in dirty)
+    assert all(engine.versions[v] == version[v] for v in set(stars) - dirty - {s})
