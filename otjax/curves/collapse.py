@@ -100,7 +100,7 @@ class _Ring:
         self.xyl = tri.xy_list
         self.source, self.target = source, target
         self.poly = list(ring)
-        self.span = float(np.hypot(*(tri.xy[target] - tri.xy[source])))
+        self._span = None  # |target - source|, read by cut only: most collapses need no flip
 
     def cut(self, a: int, b: int) -> float:
         """Distance from target to where line ``(a, b)`` crosses source -> target:
@@ -112,7 +112,9 @@ class _Ring:
         da = float(e[0] * (xy[source, 1] - xy[a, 1]) - e[1] * (xy[source, 0] - xy[a, 0]))
         db = float(e[0] * (xy[target, 1] - xy[a, 1]) - e[1] * (xy[target, 0] - xy[a, 0]))
         s = da / (da - db) if da != db else 1.0
-        return (1.0 - min(max(s, 0.0), 1.0)) * self.span
+        if self._span is None:
+            self._span = float(np.hypot(*(xy[target] - xy[source])))
+        return (1.0 - min(max(s, 0.0), 1.0)) * self._span
 
     def is_ear(self, j: int, with_source: bool) -> bool:
         """Whether polygon vertex ``j`` may leave the polygon: by the paper's

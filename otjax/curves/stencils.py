@@ -19,7 +19,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from otjax.curves.triangulation import CollapsePlan, MovePlan
+from otjax.curves.collapse import CollapsePlan, MovePlan, plan_collapse
 
 _NO_IDS = np.zeros(0, np.int64)
 
@@ -165,7 +165,7 @@ class StencilCache:
         hit = self._plans.get(key)
         if hit is not None and hit[0] == stamp:
             return hit[1]
-        plan = self.plan.tri.plan_collapse(source, target)
+        plan = plan_collapse(self.plan.tri, source, target)
         self._plans[key] = (stamp, plan)
         return plan
 
