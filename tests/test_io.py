@@ -9,7 +9,7 @@ import pytest
 from otjax.io import atomic_write, image_to_points, read_image, read_points, write_points
 
 
-@pytest.mark.parametrize("ext", [".xy", ".xyz", ".csv", ".txt"])
+@pytest.mark.parametrize("ext", [".xy", ".xyz", ".xym", ".csv", ".txt"])
 @pytest.mark.parametrize("with_masses", [False, True])
 def test_write_read_round_trip_is_exact(tmp_path, rng, ext, with_masses):
     pts = rng.standard_normal((50, 2)) * 10.0 ** rng.integers(-20, 20, size=(50, 1))
@@ -23,6 +23,15 @@ def test_write_read_round_trip_is_exact(tmp_path, rng, ext, with_masses):
     else:
         assert got_masses is None
     assert got.dtype == np.float64
+
+
+def test_cgal_weighted_points_read_as_they_are(tmp_path):
+    """CGAL's curve reconstruction demo writes ``x y mass`` per line, space separated."""
+    path = tmp_path / "demo.xym"
+    path.write_text("0.5 -1.25 2\n3e-1 4 0.125\n-7 8.5 1\n")
+    pts, masses = read_points(path)
+    np.testing.assert_array_equal(pts, [[0.5, -1.25], [0.3, 4.0], [-7.0, 8.5]])
+    np.testing.assert_array_equal(masses, [2.0, 0.125, 1.0])
 
 
 def test_csv_with_header_comments_and_blank_lines(tmp_path):
