@@ -69,11 +69,11 @@ def _kinds():
     ]
 
 
-def build_driver(build_dir: Path) -> Path | None:
+def build_driver(build_dir: Path, header: Path = HEADER) -> Path | None:
     """Compiles the reference driver; ``None`` (with a message) if it cannot be."""
     compiler = shutil.which("g++")
-    if compiler is None or not HEADER.exists():
-        missing = "g++" if compiler is None else f"the CGAL headers ({HEADER})"
+    if compiler is None or not header.exists():
+        missing = "g++" if compiler is None else f"the CGAL headers ({header})"
         print(f"compare_reference: {missing} not found; install Debian's g++ and libcgal-dev to run the "
               "reference. Nothing was compared.", file=sys.stderr)
         return None

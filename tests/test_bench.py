@@ -5,6 +5,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
+
 SCRIPT = Path(__file__).resolve().parent.parent / "scripts" / "bench_curves.py"
 
 
@@ -34,3 +36,47 @@ def test_bench_curves_rejects_bad_arguments():
     proc = subprocess.run([sys.executable, str(SCRIPT), "--sizes", "10"], capture_output=True, text=True,
                           timeout=60, check=False)
     assert proc.returncode == 2 and "sizes must be >= 100" in proc.stderr
+
+
+def _compare_reference():
+    import importlib.util
+
+    path = SCRIPT.parent / "compare_reference.py"
+    spec = importlib.util.spec_from_file_location("compare_reference", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_reference_comparison_counts_triangles_of_the_output_graph():
+    triangles = _compare_reference().triangles
+    k4 = [[0, 1], [0, 2], [0, 3], [1, 2], [1, 3], [2, 3]]
+    assert triangles(np.array(k4)) == 4
+    square_with_diagonal = [[0, 1], [1, 2], [2, 3], [3, 0], [0, 2]]
+    assert triangles(np.array(square_with_diagonal)) == 2
+    path = [[0, 1], [1, 2], [2, 3]]
+    assert triangles(np.array(path)) == 0
+    assert triangles(np.zeros((0, 2), np.int64)) == 0
+
+
+def test_reference_comparison_scores_an_exact_output_as_perfect():
+    """The truth itself as output: zero errors, F1 1, no triangle; one edge
+    moved by 5% D: that much Hausdorff, and the length off it leaves the F1."""
+    from otjax import datasets
+
+    quality = _compare_reference().quality
+    _, truth = datasets.skyline(200, seed=0)
+    segs = truth["segments"]
+    vertices = segs.reshape(-1, 2)
+    edges = np.arange(len(vertices)).reshape(-1, 2)
+    exact = quality({"vertices": vertices, "edges": edges, "isolated": np.zeros(0, np.int64)}, truth)
+    assert exact["corner_mean"] == 0 and exact["hausdorff"] < 0.1 and exact["f1"] == 1 and exact["triangles"] == 0
+    shifted = vertices.copy()
+    shifted[edges[0]] += [0.0, 0.05 * truth["diagonal"]]
+    off = quality({"vertices": shifted, "edges": edges, "isolated": np.zeros(0, np.int64)}, truth)
+    assert 4.9 < off["hausdorff"] < 5.1 and off["precision"] < 1 and off["f1"] < 1
+
+
+def test_reference_comparison_without_the_headers_says_so(tmp_path, capsys):
+    assert _compare_reference().build_driver(tmp_path, header=tmp_path / "missing.h") is None
+    assert "libcgal-dev" in capsys.readouterr().err
