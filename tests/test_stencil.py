@@ -10,7 +10,7 @@ from tests.curves.helpers import make_engine
 
 
 def loop_pack(stencils, shape, dtype=np.float64):
-    """Reference packer: one row at a time (the pre-issue-4 implementation)."""
+    """Reference packer: one row at a time, written independently of the vectorised one."""
     b_cap, e_cap, p_cap = shape
     edges = np.zeros((b_cap, e_cap, 2, 2), dtype)
     edge_mask = np.zeros((b_cap, e_cap), bool)

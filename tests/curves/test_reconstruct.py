@@ -192,7 +192,7 @@ def check_skyline(with_reloc, without, truth):
     assert with_reloc.total_cost < without.total_cost
 
 
-# Issue 4: the other queues and the random-subset initialisation pass the same
+# The other queues and the random-subset initialisation pass the same
 # acceptance checks. "subset" is the configuration for large inputs: the
 # multiple-choice queue on a triangulation of half of the points.
 MODES = {
