@@ -37,19 +37,22 @@ def require_x64(what: str) -> None:
 class ShapePolicy(NamedTuple):
     """Row capacities batches are compiled at.
 
-    At or below ``budget`` two shapes only, ``min_rows`` and ``budget``:
-    each shape costs about a second of compilation, and a packing into
-    ``min_rows`` batches is tried where it helps
-    (:func:`~otjax.batch.packing.choose_packing`). Above ``budget`` a
+    At or below ``budget`` two shapes, ``min_rows`` and ``budget``, and
+    ``tiny_rows`` below them if given: each shape costs about a second of
+    compilation, and a packing into ``min_rows`` batches is tried where it
+    helps (:func:`~otjax.batch.packing.choose_packing`). Above ``budget`` a
     batch is scored at its own capacity class (see
-    ``docs/decisions.md#row_budget``).
+    ``docs/decisions.md#row_budget`` and ``#tiny_rows``).
     """
 
     min_rows: int
     budget: int
+    tiny_rows: int = 0
 
     def shape_for(self, need: int) -> int:
         """Row capacity a batch that needs ``need`` rows is scored at."""
+        if self.tiny_rows and need <= self.tiny_rows:
+            return self.tiny_rows
         if need <= self.min_rows:
             return self.min_rows
         return self.budget if need <= self.budget else need

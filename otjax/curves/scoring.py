@@ -44,13 +44,16 @@ from otjax.stencil import EdgeStencil
 
 # Per-edge outputs, in the order of the kernel's (E, 6) array.
 EDGE_FIELDS = ("edge_cost", "normal", "tangential", "vertex", "edge_mass", "solid")
-# Smallest row capacity; every other capacity is a fixed fraction of it, so
-# that one number (see capacity) names a compiled shape.
+# Row capacities: every array of a batch is a fixed fraction of one number
+# (see capacity), which therefore names a compiled shape. The smallest
+# shape, for the few candidates of a step on a small input
+# (docs/decisions.md#tiny_rows); the shape most calls of a large run use; the
+# rows per call in the decimation loop (docs/decisions.md#row_budget).
+TINY_ROWS = 1 << 10
 MIN_ROWS = 1 << 12
-# Rows per kernel call in the decimation loop (docs/decisions.md#row_budget).
 ROW_BUDGET = 1 << 15
-# The compiled shapes: MIN_ROWS and ROW_BUDGET, above that a capacity class.
-SHAPES = ShapePolicy(MIN_ROWS, ROW_BUDGET)
+# The compiled shapes: TINY_ROWS, MIN_ROWS and ROW_BUDGET, above that a capacity class.
+SHAPES = ShapePolicy(MIN_ROWS, ROW_BUDGET, TINY_ROWS)
 EDGES_PER_ROW = 4  # E = T = R / 4
 JOBS_PER_ROW = 16  # J = R / 16
 RETRY_PER_ROW = 4  # rows whose guess fails: at most R / 4 get the second test
@@ -130,7 +133,7 @@ def capacity(rows: int, edges: int, triangles: int, jobs: int) -> int:
     Jobs get ``R / 16`` slots and one of them is kept for padding, hence the
     ``jobs + 1``.
     """
-    need = max(rows, EDGES_PER_ROW * max(edges, triangles), JOBS_PER_ROW * (jobs + 1), MIN_ROWS)
+    need = max(rows, EDGES_PER_ROW * max(edges, triangles), JOBS_PER_ROW * (jobs + 1), TINY_ROWS)
     r = 1 << (need - 1).bit_length()
     if r > THREE_QUARTER_FROM and need <= 3 * r // 4:
         return 3 * r // 4

@@ -42,13 +42,15 @@ def expected(x, group, r):
 
 
 @settings(max_examples=200, deadline=None)
-@given(need=st.integers(0, 1000), min_rows=st.sampled_from([1, 8, 4096]), factor=st.sampled_from([1, 2, 8]))
-def test_shape_for_two_shapes_up_to_the_budget_then_the_need(need, min_rows, factor):
-    policy = ShapePolicy(min_rows, min_rows * factor)
+@given(need=st.integers(0, 1000), min_rows=st.sampled_from([1, 8, 4096]), factor=st.sampled_from([1, 2, 8]),
+       tiny=st.sampled_from([0, 1, 2]))
+def test_shape_for_few_shapes_up_to_the_budget_then_the_need(need, min_rows, factor, tiny):
+    policy = ShapePolicy(min_rows, min_rows * factor, min_rows // 4 * tiny // 2)
     r = policy.shape_for(need)
     assert r >= need
     if need <= policy.budget:
-        assert r == (policy.min_rows if need <= policy.min_rows else policy.budget)
+        small = [s for s in (policy.tiny_rows, policy.min_rows) if s > 0]
+        assert r == next((s for s in small if need <= s), policy.budget)
     else:
         assert r == need
     assert policy.shape_for(need + 1) >= r  # monotone

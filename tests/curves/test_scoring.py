@@ -114,12 +114,12 @@ def test_relocation_batches_equal_located_relocations():
 @given(rows=st.integers(0, 300_000), edges=st.integers(0, 80_000), tris=st.integers(0, 80_000),
        jobs=st.integers(0, 20_000))
 def test_capacity_is_the_smallest_class_that_fits(rows, edges, tris, jobs):
-    """Classes: powers of two from MIN_ROWS, and above THREE_QUARTER_FROM also
+    """Classes: powers of two from TINY_ROWS, and above THREE_QUARTER_FROM also
     three quarters of one; the capacity is the least class whose slots hold
     the batch (R rows, R/4 edges and triangles, R/16 jobs, one kept)."""
-    classes = sorted({scoring.MIN_ROWS << k for k in range(12)}
-                     | {3 * (scoring.MIN_ROWS << k) // 4 for k in range(12)
-                        if 3 * (scoring.MIN_ROWS << k) // 4 > scoring.THREE_QUARTER_FROM})
+    classes = sorted({scoring.TINY_ROWS << k for k in range(14)}
+                     | {3 * (scoring.TINY_ROWS << k) // 4 for k in range(14)
+                        if 3 * (scoring.TINY_ROWS << k) // 4 > scoring.THREE_QUARTER_FROM})
     fits = [c for c in classes if rows <= c and max(edges, tris) <= c // 4 and jobs + 1 <= c // 16]
     assert scoring.capacity(rows, edges, tris, jobs) == fits[0]
 
