@@ -21,18 +21,21 @@ Public API (2D curves):
 """
 
 from otjax import batch, curves, datasets, decimation, metrics, stencil
+from otjax.background import Background, estimate_background
 from otjax.compile_cache import enable_compilation_cache
 from otjax.curves.reconstruct import reconstruct_curve
 from otjax.curves.result import CurveResult
 from otjax.io import image_to_points, read_points
 
 __all__ = [
+    "Background",
     "CurveResult",
     "batch",
     "curves",
     "datasets",
     "decimation",
     "enable_compilation_cache",
+    "estimate_background",
     "image_to_points",
     "metrics",
     "read_points",

@@ -62,11 +62,17 @@ def _curve_parser(sub) -> argparse.ArgumentParser:
     p.add_argument("--relevance", type=float, metavar="R", help="drop edges less relevant than R")
     p.add_argument("--density", type=float, metavar="F",
                    help="drop edges whose mass per length is below F (0..1) times the largest")
-    p.add_argument("--relocation", type=int, metavar="K", help="relocate during the last K collapses")
+    p.add_argument("--background", choices=("auto", "none"),
+                   help="estimate uniform background noise and discount it (auto, the default) or not")
+    p.add_argument("--keep-chords", action="store_true", default=None,
+                   help="keep the redundant chords of 3-cycles that noise leaves")
+    p.add_argument("--relocation", type=int, metavar="K",
+                   help="relocate during the last K collapses only (default: after every collapse)")
     p.add_argument("--final-relocations", type=int, metavar="P", help="relocation passes at the end")
     p.add_argument("--refine", action="store_true", default=None, help="refine vertices by gradient descent")
     p.add_argument("--queue", choices=QUEUES,
-                   help="collapse order: exhaustive (default), multiple-choice (large inputs), parallel")
+                   help="collapse order: exhaustive, multiple-choice, parallel (default: exhaustive up to "
+                   "2000 collapses, multiple-choice above)")
     p.add_argument("--choices", type=int, metavar="K", help="multiple-choice: half-edges drawn per step (15)")
     p.add_argument("--initial-vertices", type=int, metavar="V",
                    help="random subset of the points used as initial vertices (default: automatic)")
@@ -135,6 +141,8 @@ def _load(args, usage) -> tuple:
         "tolerance": args.tolerance,
         "relevance": args.relevance,
         "density": args.density,
+        "background": args.background,
+        "chords": None if args.keep_chords is None else not args.keep_chords,
         "relocation": args.relocation,
         "final_relocations": args.final_relocations,
         "refine": args.refine,

@@ -119,6 +119,8 @@ class TransportPlan:
       pt_edge: ``(n, 2)`` edge key each point is assigned to.
       edge_cost, edge_solid: per edge key holding points, its cost and
         whether it keeps its points (solid) or sends them to its ends (ghost).
+      edge_normal: per edge key holding points, the normal part ``N`` of
+        its points (squared distances to its supporting line), solid or not.
     """
 
     def __init__(self, tri: Triangulation, points: np.ndarray, mass: np.ndarray):
@@ -135,6 +137,7 @@ class TransportPlan:
         self.pt_edge = self._nearest_edges(np.arange(len(self.points)))
         self.edge_cost: dict[tuple[int, int], float] = {}
         self.edge_solid: dict[tuple[int, int], bool] = {}
+        self.edge_normal: dict[tuple[int, int], float] = {}
 
     def _nearest_edges(self, ids: np.ndarray) -> np.ndarray:
         """``(len(ids), 2)`` edge keys: nearest edge of each point's triangle."""
@@ -162,8 +165,10 @@ class TransportPlan:
     def set_edge_costs(self, keys: np.ndarray, per_edge: np.ndarray) -> None:
         """Stores the kernel's per-edge fields ``per_edge (m, 6)``
         (:data:`otjax.curves.scoring.EDGE_FIELDS`) for the edges ``keys (m, 2)``."""
-        for (u, v), c, solid in zip(keys.tolist(), per_edge[:, 0].tolist(), (per_edge[:, 5] > 0).tolist()):
+        for (u, v), c, n, solid in zip(keys.tolist(), per_edge[:, 0].tolist(), per_edge[:, 1].tolist(),
+                                       (per_edge[:, 5] > 0).tolist()):
             self.edge_cost[(u, v)] = c
+            self.edge_normal[(u, v)] = n
             self.edge_solid[(u, v)] = solid
 
     def solid_of(self, keys: np.ndarray) -> np.ndarray:
@@ -181,6 +186,11 @@ class TransportPlan:
     def total_cost(self) -> float:
         """Squared W2 cost of the current plan (sum of the edge costs)."""
         return float(sum(self.edge_cost.values()))
+
+    def normal_of(self, keys) -> float:
+        """Sum of the normal parts :attr:`edge_normal` over the edge ``keys``."""
+        get = self.edge_normal.get
+        return float(sum(get(k, 0.0) for k in map(tuple, np.asarray(keys).reshape(-1, 2).tolist())))
 
     def apply(self, cand, scored) -> Change:
         """Performs a scored change (collapse or move) and updates the plan.
@@ -200,6 +210,7 @@ class TransportPlan:
             for a in plan.ring:
                 k = edge_key(plan.source, a)
                 self.edge_cost.pop(k, None)
+                self.edge_normal.pop(k, None)
                 self.edge_solid.pop(k, None)
         else:
             v = plan.source
@@ -223,8 +234,10 @@ class TransportPlan:
             for f, chunk in zip(uf, np.split(inside[order], st[1:])):
                 self.face_pts[int(f)] = chunk
         self.pt_edge[cand.point_ids] = np.take(cand.keys, scored.assignment, axis=0)
-        for k, c, solid in zip(map(tuple, cand.keys.tolist()), scored.edge_cost.tolist(), scored.solid.tolist()):
+        for k, c, n, solid in zip(map(tuple, cand.keys.tolist()), scored.edge_cost.tolist(),
+                                  scored.normal.tolist(), scored.solid.tolist()):
             self.edge_cost[k] = c
+            self.edge_normal[k] = n
             self.edge_solid[k] = solid
 
     def _change(self, cand, new_ids: np.ndarray) -> Change:

@@ -15,6 +15,8 @@ from typing import NamedTuple
 import jax
 import numpy as np
 
+from otjax.background import Background, estimate_background
+from otjax.curves import filtering
 from otjax.curves.decimate import QUEUES, DecimationStats, decimate, within_tolerance
 from otjax.curves.engine import CurveEngine
 from otjax.curves.plan import TransportPlan
@@ -25,9 +27,18 @@ from otjax.decimation.relocation import relocate
 from otjax.validation import check_number, check_points, check_target
 
 
+BACKGROUNDS = ("auto", "none")
+# The size rules of the defaults (docs/decisions.md#default_initial_vertices, #default_queue).
+INITIAL_ALL = 4000
+INITIAL_FLOOR = 2000
+INITIAL_PER_VERTEX = 20
+EXHAUSTIVE_COLLAPSES = 4000
+
+
 def reconstruct_curve(points, masses=None, n_vertices: int | None = None, *, tolerance: float | None = None,
-                      relevance: float = 0.0, density: float = 0.0, relocation: int = 100,
-                      final_relocations: int = 1, refine: bool = False, queue: str = "exhaustive",
+                      relevance: float = 0.0, density: float = 0.0, background: str = "auto",
+                      chords: bool = True, relocation: int | None = 100,
+                      final_relocations: int = 4, refine: bool = False, queue: str | None = None,
                       choices: int = 15, round_fraction: float = 0.05, initial_vertices: int | None = None,
                       seed: int = 0, merge_duplicates: bool = False, progress: bool = False) -> CurveResult:
     """Reconstructs a curve (vertices and edges) from a weighted 2D point set.
@@ -48,13 +59,27 @@ def reconstruct_curve(points, masses=None, n_vertices: int | None = None, *, tol
         the paper: its relevance does not depend on density at all (``M_e``
         cancels against ``N_e + T_e``), so it cannot tell a sparse outlier
         edge from a dense one on the shape (docs/benchmarks.md#outliers-relevance-against-density).
+      background: ``"auto"``: estimate uniform background noise from the
+        points (:func:`otjax.background.estimate_background`); where there
+        is some, each point's mass is scaled by its probability of being
+        shape before the reconstruction, and edges and isolated vertices
+        that do not stand out of the background are dropped at the end
+        (:func:`otjax.curves.filtering.above_background`). Without
+        background (clean or merely noisy input) nothing changes.
+        ``"none"``: no estimate.
+      chords: drop the redundant chords of 3-cycles of solid edges that
+        noise leaves (:func:`otjax.curves.filtering.redundant_chords`).
       relocation: relocate the vertices of the modified one-ring after each
-        of the last ``relocation`` collapses (paper: 100); ``0`` disables.
-        Ignored in pure tolerance mode, where the end is not known ahead.
-      final_relocations: relocation passes over every vertex at the end.
+        of the last ``relocation`` collapses (paper and default: 100);
+        ``None``: after every collapse (as the C++ reference does); ``0``
+        disables. Ignored in pure tolerance mode, where the end is not
+        known ahead.
+      final_relocations: relocation passes over every vertex at the end
+        (fewer if a pass moves none).
       refine: after the closed form, refine all vertex positions by L-BFGS
         on the fixed-assignment cost (kept only if the cost does not rise).
-      queue: ``"exhaustive"`` (every half-edge scored, the paper's default),
+      queue: ``None``: :func:`default_queue`; ``"exhaustive"`` (every
+        half-edge scored, the paper's default),
         ``"multiple-choice"`` (paper §3.5: the best of ``choices`` random
         half-edges per step, exhaustive below 5x the target) or
         ``"parallel"`` (independent sets of cheap collapses per round; not
@@ -89,25 +114,29 @@ def reconstruct_curve(points, masses=None, n_vertices: int | None = None, *, tol
     t_start = time.perf_counter()
     points, masses = check_points(points, masses, dim=2, merge_duplicates=merge_duplicates)
     params = _check_params(len(points), n_vertices=n_vertices, tolerance=tolerance, relevance=relevance,
-                           density=density, relocation=relocation, final_relocations=final_relocations,
+                           density=density, background=background, chords=chords, relocation=relocation, final_relocations=final_relocations,
                            refine=refine, queue=queue, choices=choices, round_fraction=round_fraction,
                            initial_vertices=initial_vertices, seed=seed, merge_duplicates=merge_duplicates)
+    noise = estimate_background(points) if params["background"] == "auto" else None
+    transported = masses * (1.0 - noise.probability) if noise is not None and noise.found else masses
     # Point location is exact float64 arithmetic: the whole run is in JAX's
     # x64 mode, entered here, at the boundary, for its duration only.
     with jax.enable_x64(True):
-        run = _run(points, masses, params, progress)
+        run = _run(points, transported, params, progress)
     stats = run.stats
     result = result_from_plan(run.engine.plan, params["relevance"], params, time.perf_counter() - t_start,
-                              params["density"])
+                              params["density"], background=noise, input_mass=masses, chords=params["chords"])
     result.history = {"collapses": stats.collapses, "relocations": run.relocations, "scored": stats.scored,
                       "updated": stats.updated, "kernel_calls": stats.kernel_calls, "seconds": run.seconds,
                       "rounds": stats.rounds, "switched_at": stats.switched_at,
                       "compiled_shapes": run.engine.compiled_shapes,
-                      "refine": run.refined}
+                      "refine": run.refined,
+                      "background_fraction": noise.fraction if noise is not None else 0.0}
     return result
 
 
-def _check_params(n_points: int, *, n_vertices, tolerance, relevance, density, relocation, final_relocations,
+def _check_params(n_points: int, *, n_vertices, tolerance, relevance, density, background, chords, relocation,
+                  final_relocations,
                   refine, queue, choices, round_fraction, initial_vertices, seed, merge_duplicates) -> dict:
     """The validated parameters of :func:`reconstruct_curve`, as its result's ``params``."""
     if n_vertices is None and tolerance is None:
@@ -122,10 +151,12 @@ def _check_params(n_points: int, *, n_vertices, tolerance, relevance, density, r
     density = check_number("density", density)
     if density > 1:
         raise ValueError(f"density must be in [0, 1], got {density}")
-    relocation = check_number("relocation", relocation, integer=True)
+    if background not in BACKGROUNDS:
+        raise ValueError(f"background must be one of {', '.join(BACKGROUNDS)}, got {background!r}")
+    relocation = check_number("relocation", relocation, integer=True, allow_none=True)
     final_relocations = check_number("final_relocations", final_relocations, integer=True)
     seed = check_number("seed", seed, integer=True)
-    if queue not in QUEUES:
+    if queue is not None and queue not in QUEUES:
         raise ValueError(f"queue must be one of {', '.join(QUEUES)}, got {queue!r}")
     choices = check_number("choices", choices, minimum=1, integer=True)
     round_fraction = check_number("round_fraction", round_fraction)
@@ -137,7 +168,10 @@ def _check_params(n_points: int, *, n_vertices, tolerance, relevance, density, r
     if n_vertices is not None and initial_vertices < n_vertices:
         raise ValueError(f"initial_vertices ({initial_vertices}) must be >= n_vertices ({n_vertices})")
     initial_vertices = min(initial_vertices, n_points)
+    if queue is None:
+        queue = default_queue(initial_vertices, n_vertices)
     return {"n_vertices": n_vertices, "tolerance": tolerance, "relevance": relevance, "density": density,
+            "background": background, "chords": bool(chords),
             "relocation": relocation, "final_relocations": final_relocations, "refine": bool(refine),
             "queue": queue, "choices": choices, "round_fraction": round_fraction,
             "initial_vertices": initial_vertices,
@@ -169,7 +203,9 @@ def _run(points, masses, params: dict, progress: bool) -> _Outcome:
         vertices = points
     engine = CurveEngine(Triangulation(vertices), points, masses)
     timings["init"] = time.perf_counter() - t0
-    stats = decimate(engine, n_vertices, tolerance=tolerance, relocation=params["relocation"],
+    relocation = params["relocation"]
+    stats = decimate(engine, n_vertices, tolerance=tolerance,
+                     relocation=len(points) if relocation is None else relocation,
                      queue=params["queue"], choices=params["choices"], round_fraction=params["round_fraction"],
                      seed=int(rng.integers(2**63)), progress=progress)
     timings.update(stats.seconds)
@@ -203,9 +239,19 @@ def default_initial_vertices(n_points: int, n_vertices: int | None) -> int:
     subset mostly adds collapses (docs/decisions.md#default_initial_vertices).
     Tolerance mode (no target) uses the floor of 2000.
     """
-    if n_points <= 4000:
+    if n_points <= INITIAL_ALL:
         return n_points
-    return min(n_points, max(2000, 20 * (n_vertices or 0)))
+    return min(n_points, max(INITIAL_FLOOR, INITIAL_PER_VERTEX * (n_vertices or 0)))
+
+
+def default_queue(initial_vertices: int, n_vertices: int | None) -> str:
+    """Queue used when ``queue`` is not given: ``"exhaustive"`` for runs of at
+    most :data:`EXHAUSTIVE_COLLAPSES` collapses (``initial_vertices -
+    n_vertices``; tolerance mode counts all of them), ``"multiple-choice"``
+    above, where it is about twice as fast for the same cost
+    (docs/decisions.md#default_queue)."""
+    collapses = initial_vertices - (n_vertices or 0)
+    return "exhaustive" if collapses <= EXHAUSTIVE_COLLAPSES else "multiple-choice"
 
 
 def vertex_and_edge_masses(plan: TransportPlan) -> tuple[dict, dict]:
@@ -238,15 +284,34 @@ def vertex_and_edge_masses(plan: TransportPlan) -> tuple[dict, dict]:
     return edge_mass, vertex_mass
 
 
+def _points_of(plan: TransportPlan, keys: list) -> list[np.ndarray]:
+    """Per edge key of ``keys``, the ids of the points assigned to it."""
+    nv = len(plan.tri.xy)
+    code = plan.pt_edge[:, 0] * nv + plan.pt_edge[:, 1]
+    order = np.argsort(code, kind="stable")
+    sorted_code = code[order]
+    out = []
+    for a, b in keys:
+        lo, hi = np.searchsorted(sorted_code, [a * nv + b, a * nv + b + 1])
+        out.append(np.sort(order[lo:hi]))
+    return out
+
+
 def result_from_plan(plan: TransportPlan, relevance: float, params: dict, seconds: float,
-                     density: float = 0.0) -> CurveResult:
-    """Filters the solid edges of a plan by relevance and density; packs a result.
+                     density: float = 0.0, background: Background | None = None,
+                     input_mass: np.ndarray | None = None, chords: bool = False) -> CurveResult:
+    """Filters the solid edges of a plan; packs a result.
 
     Kept: solid edges with relevance ``M_e |e|^2 / (N_e + T_e) >= relevance``
-    and ``M_e / |e| >= density * max`` (max over the solid edges),
-    their endpoints, and isolated vertices (vertices that receive mass but
-    lie on no kept edge). Vertices are numbered in increasing internal id.
-    The pinned box corners and every edge touching them are scaffolding and
+    and ``M_e / |e| >= density * max`` (max over the solid edges); with
+    ``chords``, minus the redundant chords of 3-cycles
+    (:func:`~otjax.curves.filtering.redundant_chords`); with a ``background``
+    that was found, minus the edges (and isolated vertices) whose band of
+    the input (``input_mass``, default the plan's masses) does not stand out
+    of it (:func:`~otjax.curves.filtering.above_background`). Then their
+    endpoints, and isolated vertices (vertices that receive mass but lie on
+    no kept edge). Vertices are numbered in increasing internal id. The
+    pinned box corners and every edge touching them are scaffolding and
     never appear.
     """
     tri = plan.tri
@@ -265,8 +330,21 @@ def result_from_plan(plan: TransportPlan, relevance: float, params: dict, second
             kept.append(key)
             masses.append(edge_mass[key])
             rel.append(r)
+    if chords and kept:
+        keep = filtering.redundant_chords(kept, tri.xy, _points_of(plan, kept), plan.points, plan.mass)
+        kept, masses, rel = ([x for x, k in zip(seq, keep) if k] for seq in (kept, masses, rel))
     on_edges = {v for e in kept for v in e}
     isolated = sorted(v for v, m in vertex_mass.items() if m > 0 and v not in on_edges and not tri.pinned[v])
+    if background is not None and background.found and (kept or isolated):
+        normal = np.array([plan.edge_normal.get(k, 0.0) for k in kept])
+        width = filtering.BAND_WIDTHS * filtering.noise_width(normal, np.array(masses))
+        seg = np.array([[tri.xy[a], tri.xy[b]] for a, b in kept]).reshape(-1, 2, 2)
+        mass = plan.mass if input_mass is None else input_mass
+        keep, keep_v = filtering.above_background(seg, tri.xy[isolated].reshape(-1, 2), plan.points, mass,
+                                                  background, width)
+        kept, masses, rel = ([x for x, k in zip(seq, keep) if k] for seq in (kept, masses, rel))
+        on_edges = {v for e in kept for v in e}
+        isolated = [v for v, k in zip(isolated, keep_v) if k and v not in on_edges]
     ids = sorted(on_edges | set(isolated))
     index = {v: i for i, v in enumerate(ids)}
     return CurveResult(

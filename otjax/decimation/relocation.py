@@ -1,4 +1,4 @@
-"""Rounds of vertex moves: proposals scored in batches, applied by decreasing gain."""
+"""A pass of vertex moves, in order, its proposals scored in batches."""
 
 from __future__ import annotations
 
@@ -8,18 +8,19 @@ import numpy as np
 
 
 def relocate(engine, vertices, veto: Callable | None = None) -> tuple[set[int], int]:
-    """Moves each of ``vertices`` where its engine proposes, if that lowers the cost.
+    """One pass over ``vertices``, in order: each moves where its engine
+    proposes if the engine's gain for that move is negative.
 
-    Moves of adjacent vertices interact (they share simplices), so the work
-    is done in rounds: each round has the engine propose and score a move for
-    every vertex still waiting (one batched call), and applies the improving
-    ones by decreasing gain, skipping any vertex that a move of this round
-    made dirty; those wait for the next round. Every vertex is considered
-    once; a vertex without an admissible proposal drops out.
+    The result is that of visiting the vertices one at a time, each proposal
+    made and scored on the state the moves before it left; the work is
+    batched: the proposals of a prefix of the waiting vertices that lie
+    more than two edges apart are made and scored in one call, then applied
+    in order (a vertex that an applied move made dirty after all ends the
+    prefix early, and the next call resumes there).
 
     Args:
       engine: gives ``movable(v)``, ``propose_moves(vertices) -> [(vertex,
-        delta, scored)]`` (scored against the current state) and
+        gain, scored)]`` (scored against the current state) and
         ``apply(*scored)`` returning a change with ``dirty``.
       vertices: vertex ids (duplicates and immovable ones are skipped).
       veto: optional ``(*scored) -> bool`` admissibility filter.
@@ -32,27 +33,46 @@ def relocate(engine, vertices, veto: Callable | None = None) -> tuple[set[int], 
     dirty: set[int] = set()
     moved = 0
     while waiting:
-        proposals = engine.propose_moves(waiting)
-        if not proposals:
-            break
-        blocked: set[int] = set()
-        done: set[int] = set()
-        delta = np.array([p[1] for p in proposals], np.float64)
-        for i in np.argsort(delta, kind="stable"):
-            v, gain, scored = proposals[i]
-            if gain >= 0:
-                done.add(v)
+        chunk = _independent_prefix(engine, waiting)
+        proposals = {v: (gain, scored) for v, gain, scored in engine.propose_moves(chunk)}
+        changed: set[int] = set()
+        done = 0
+        for v in chunk:
+            if v in changed:
+                break
+            done += 1
+            gain, scored = proposals.get(v, (0.0, None))
+            if not gain < 0 or (veto is not None and not veto(*scored)):
                 continue
-            if v in blocked:
-                continue
-            if veto is not None and not veto(*scored):
-                done.add(v)
-                continue
-            changed = engine.apply(*scored).dirty
-            dirty |= changed
-            blocked |= changed
+            changed |= engine.apply(*scored).dirty
             moved += 1
-            done.add(v)
-        proposed = {p[0] for p in proposals}
-        waiting = [v for v in waiting if v in proposed and v not in done]
+        dirty |= changed
+        waiting = waiting[done:]
     return dirty, moved
+
+
+def _independent_prefix(engine, waiting: list[int]) -> list[int]:
+    """The longest prefix of ``waiting`` in which no vertex is within two
+    edges of an earlier one: a move dirties at most its vertex's neighbours
+    and the vertices across its link, so the proposals of such a prefix,
+    made on one state, are those that visiting it in order would make.
+    (A vertex across a link edge from ``v`` is in the ring of that edge's
+    free end; a link edge with two pinned ends makes ``v`` go alone.)"""
+    near: set[int] = set()
+    chunk = []
+    for v in waiting:
+        if v in near:
+            break
+        ring = engine.ring(v)
+        free = [engine.movable(u) for u in ring]
+        if any(not a and not b for a, b in zip(free, free[1:] + free[:1])):
+            # Across a link edge between two pinned vertices lies a vertex no
+            # free neighbour's ring names: this one goes alone.
+            return chunk or [v]
+        chunk.append(v)
+        near.add(v)
+        near.update(ring)
+        for u, ok in zip(ring, free):
+            if ok:
+                near.update(engine.ring(u))
+    return chunk

@@ -178,3 +178,37 @@ def test_curve_decimate_needs_a_target_or_a_tolerance():
         decimate(engine)
     with pytest.raises(ValueError, match="n_vertices must be >= 1"):
         decimate(engine, 0)
+
+
+def one_at_a_time(engine):
+    """Makes ``engine`` score each proposed move in a kernel call of its own."""
+    batched = engine.propose_moves
+
+    def propose_moves(vertices):
+        return [p for v in vertices for p in batched([v])]
+
+    engine.propose_moves = propose_moves
+    return engine
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_relocation_after_every_collapse_is_the_same_batched_or_not(seed):
+    import jax
+
+    from otjax.decimation.relocation import relocate
+
+    with jax.enable_x64(True):
+        a = make_engine(np.random.default_rng(seed), n=200)
+        b = one_at_a_time(make_engine(np.random.default_rng(seed), n=200))
+        sa = decimate(a, 40, relocation=10**6)
+        sb = decimate(b, 40, relocation=10**6)
+        assert sa.relocations == sb.relocations > 0
+        # A pass over every vertex, batched, against visiting them one by one.
+        vertices = a.live_sources()
+        _, moved = relocate(a, vertices)
+        for v in vertices:
+            relocate(b, [v])
+    assert a.scorer.calls < b.scorer.calls  # the batched side did share calls
+    np.testing.assert_array_equal(a.plan.tri.xy, b.plan.tri.xy)  # bitwise
+    np.testing.assert_array_equal(a.plan.pt_edge, b.plan.pt_edge)
+    assert a.total_cost() == b.total_cost()

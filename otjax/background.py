@@ -1,0 +1,104 @@
+"""Uniform background noise in a point set: its density and each point's share.
+
+The model: the points are a mixture of a shape (curve or surface, dense near
+itself) and uniform background noise over the bounding box, of density
+``beta`` (points per unit area or volume). A k-nearest-neighbour estimate
+gives the local density ``rho_i`` at each point; under the mixture the
+probability that point ``i`` is background is ``min(1, beta / rho_i)``.
+
+``beta`` is found from the points alone: starting from the density of a
+box filled uniformly, it is repeatedly replaced by the median density of
+the points below twice it, which settles on the lowest dense level of
+the data. That level is background only if it explains about as many
+points as it predicts over the box (``beta * volume``) and if those points
+fill space: the number of neighbours within ``r`` of them grows as ``r^d``
+(``d`` the dimension; ``r^(d-1)`` on a curve or surface). A sparse shape
+without outliers fails one test or the other, gets ``beta = 0``, and every
+point keeps its full mass (docs/decisions.md#background).
+
+NumPy and scipy only: the same estimate serves curves and surfaces.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+NEIGHBOURS = 16
+LEVEL_FACTOR = 2.0
+CONSISTENCY = 0.5
+DIMENSION_MARGIN = 0.5
+
+
+class Background(NamedTuple):
+    """The background estimate of a point set.
+
+    Attributes:
+      density: ``beta``, background points per unit area (volume in 3D), in
+        the units of the input; ``0`` when no background was found.
+      fraction: ``beta * volume / n``, the estimated share of background points.
+      probability: ``(n,)`` each point's probability of being background,
+        ``min(1, beta / rho_i)`` (all zeros when ``density == 0``).
+      local_density: ``(n,)`` the k-nearest-neighbour density ``rho_i``.
+    """
+
+    density: float
+    fraction: float
+    probability: np.ndarray
+    local_density: np.ndarray
+
+    @property
+    def found(self) -> bool:
+        return self.density > 0
+
+
+def estimate_background(points: np.ndarray, neighbours: int = NEIGHBOURS) -> Background:
+    """Estimates uniform background noise in ``points (n, d)`` (see the module doc).
+
+    Args:
+      points: ``(n, d)`` validated float64 points, ``d`` in 2 or 3, distinct.
+      neighbours: ``k`` of the k-nearest-neighbour density.
+
+    Returns:
+      A :class:`Background`. Fewer than ``4 k`` points, or a flat bounding
+      box, give no background.
+    """
+    points = np.asarray(points, np.float64)
+    n, dim = points.shape
+    none = Background(0.0, 0.0, np.zeros(n), np.zeros(n))
+    extent = points.max(0) - points.min(0) if n else np.zeros(dim)
+    volume = float(np.prod(extent))
+    if n < 4 * neighbours or not volume > 0:
+        return none
+    # Work in the frame of the box (unit diagonal), so that the result does not depend on units.
+    scale = float(np.linalg.norm(extent))
+    unit = (points - points.min(0)) / scale
+    far = min(n - 1, 4 * neighbours)
+    dist, _ = cKDTree(unit).query(unit, [neighbours + 1, far + 1])
+    radius = dist[:, 0]
+    ball = math.pi ** (dim / 2) / math.gamma(dim / 2 + 1)
+    with np.errstate(divide="ignore"):
+        rho = neighbours / (ball * radius**dim)
+    unit_volume = volume / scale**dim
+    beta = n / unit_volume
+    for _ in range(100):
+        below = rho < LEVEL_FACTOR * beta
+        if not below.any():
+            return none._replace(local_density=rho / scale**dim)
+        level = float(np.median(rho[below]))
+        if abs(level - beta) <= 1e-12 * beta:
+            break
+        beta = level
+    below = rho < LEVEL_FACTOR * beta
+    # Background fills the box: around its points the neighbour count grows
+    # as r^d. Points of a sparse shape grow as r^(d-1) and do not count.
+    with np.errstate(divide="ignore", invalid="ignore"):
+        growth = np.log(far / neighbours) / np.log(dist[below, 1] / radius[below])
+    if (np.count_nonzero(below) < CONSISTENCY * beta * unit_volume
+            or not np.median(growth) > dim - DIMENSION_MARGIN):
+        return none._replace(local_density=rho / scale**dim)
+    probability = np.minimum(1.0, beta / rho)
+    return Background(beta / scale**dim, float(beta * unit_volume / n), probability, rho / scale**dim)

@@ -1,0 +1,150 @@
+"""Filters on the solid edges of a finished reconstruction, beyond relevance.
+
+Two tests, both decided by the data:
+
+* :func:`above_background`: where the input holds uniform background noise
+  (:mod:`otjax.background`), an edge is kept only if the band around it
+  holds significantly more mass than that background puts there; likewise
+  an isolated vertex and the disc around it. Without background every edge
+  passes.
+* :func:`redundant_chords`: noise can leave a thin triangle of solid edges
+  where the shape has a single corner or a single line: one edge of the
+  3-cycle carries points that the two others would hold almost as well.
+  Such an edge is dropped when its points lie, on average, within a few
+  noise widths of the other kept edges (docs/decisions.md#redundant_chords).
+  A true triangle of the shape keeps its three edges: the points of each
+  side are far from the two others.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from otjax.background import Background
+
+# Kept when the band's mass is above BAND_RATIO x the background's expectation
+# plus BAND_SIGMAS Poisson deviations of it.
+BAND_RATIO = 2.0
+BAND_SIGMAS = 3.0
+# Band half-width in noise widths (the mass-weighted median RMS normal distance of the edges).
+BAND_WIDTHS = 2.0
+# A chord goes when its points' mean squared distance to the other edges is
+# within this many times the mean squared distance of all kept points to their own edge.
+CHORD_FACTOR = 8.0
+
+
+def segment_sqdist(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``(n,)`` squared distances of points ``p (n, 2)`` to the segment ``[a, b]``."""
+    d = b - a
+    dd = float(d @ d)
+    t = np.clip((p - a) @ d / dd, 0.0, 1.0) if dd > 0 else np.zeros(len(p))
+    q = a + t[:, None] * d
+    return ((p - q) ** 2).sum(1)
+
+
+def noise_width(normal: np.ndarray, mass: np.ndarray) -> float:
+    """Mass-weighted median over edges of the RMS normal distance ``sqrt(N_e / M_e)``."""
+    ok = mass > 0
+    if not ok.any():
+        return 0.0
+    rms = np.sqrt(normal[ok] / mass[ok])
+    order = np.argsort(rms)
+    cum = np.cumsum(mass[ok][order])
+    return float(rms[order][np.searchsorted(cum, 0.5 * cum[-1])])
+
+
+def above_background(segments: np.ndarray, isolated: np.ndarray, points: np.ndarray, mass: np.ndarray,
+                     background: Background, width: float) -> tuple[np.ndarray, np.ndarray]:
+    """Which edges and isolated vertices stand out of the background noise.
+
+    Args:
+      segments: ``(m, 2, 2)`` kept edges' endpoints.
+      isolated: ``(k, 2)`` isolated vertices.
+      points, mass: ``(n, 2)``, ``(n,)`` the input points and their masses.
+      background: its :class:`~otjax.background.Background` estimate.
+      width: half-width of the band around an edge (radius of the disc
+        around a vertex), input units.
+
+    Returns:
+      ``(edge_kept (m,), vertex_kept (k,))`` bool; all True when no
+      background was found.
+    """
+    edge_kept = np.ones(len(segments), bool)
+    vertex_kept = np.ones(len(isolated), bool)
+    if not background.found or not width > 0:
+        return edge_kept, vertex_kept
+    unit = float(mass.mean())  # the background is counted in points, the bands in mass
+    tree = cKDTree(points)
+
+    def significant(band_mass: float, area: float) -> bool:
+        expected = background.density * area * unit
+        return band_mass > BAND_RATIO * expected + BAND_SIGMAS * np.sqrt(expected * unit)
+
+    for i, (a, b) in enumerate(segments):
+        length = float(np.linalg.norm(b - a))
+        near = np.asarray(tree.query_ball_point(0.5 * (a + b), 0.5 * length + width), np.int64)
+        inside = near[segment_sqdist(points[near], a, b) <= width**2] if len(near) else near
+        edge_kept[i] = significant(float(mass[inside].sum()), 2 * width * length + np.pi * width**2)
+    for i, v in enumerate(isolated):
+        near = np.asarray(tree.query_ball_point(v, width), np.int64)
+        vertex_kept[i] = significant(float(mass[near].sum()), np.pi * width**2)
+    return edge_kept, vertex_kept
+
+
+def _triangles(keys: list[tuple[int, int]]) -> list[tuple[int, int, int]]:
+    """3-cycles of the graph ``keys`` (each once, as indices into ``keys``)."""
+    index = {k: i for i, k in enumerate(keys)}
+    nbr: dict[int, set] = {}
+    for a, b in keys:
+        nbr.setdefault(a, set()).add(b)
+        nbr.setdefault(b, set()).add(a)
+    out = []
+    for a, b in keys:
+        for c in sorted(nbr[a] & nbr[b]):
+            if c > max(a, b):
+                out.append((index[(a, b)], index[tuple(sorted((a, c)))], index[tuple(sorted((b, c)))]))
+    return out
+
+
+def redundant_chords(keys: list[tuple[int, int]], xy: np.ndarray, edge_points: list[np.ndarray],
+                     points: np.ndarray, mass: np.ndarray) -> np.ndarray:
+    """Which kept edges survive the removal of redundant chords of 3-cycles.
+
+    Args:
+      keys: ``m`` kept edges as ``(u, v)`` vertex ids into ``xy``.
+      xy: ``(V, 2)`` vertex positions.
+      edge_points: per edge, the ids of the points it carries.
+      points, mass: ``(n, 2)``, ``(n,)`` the points and the masses transported.
+
+    Returns:
+      ``(m,)`` bool, False for the dropped chords. One edge goes at a time,
+      the most redundant first, until no 3-cycle has a redundant edge.
+    """
+    kept = np.ones(len(keys), bool)
+    seg = np.array([[xy[a], xy[b]] for a, b in keys]).reshape(-1, 2, 2)
+    own = [segment_sqdist(points[ids], *seg[i]) for i, ids in enumerate(edge_points)]
+    weight = [mass[ids] for ids in edge_points]
+    total = sum(float(w.sum()) for w in weight)
+    if not total > 0:
+        return kept
+    noise2 = sum(float(w @ d) for w, d in zip(weight, own)) / total
+    while True:
+        alive = [i for i in np.flatnonzero(kept)]
+        cycles = _triangles([keys[i] for i in alive])
+        if not cycles:
+            return kept
+        best, best_score = -1, np.inf
+        for e in sorted({alive[j] for cyc in cycles for j in cyc}):
+            w = weight[e]
+            if not w.sum() > 0:
+                score = 0.0
+            else:
+                others = [i for i in alive if i != e]
+                d2 = np.min([segment_sqdist(points[edge_points[e]], *seg[i]) for i in others], axis=0)
+                score = float(w @ d2) / float(w.sum())
+            if score < best_score:
+                best, best_score = e, score
+        if best_score > CHORD_FACTOR * noise2:
+            return kept
+        kept[best] = False

@@ -1,0 +1,127 @@
+"""Edge filters decided by the data (otjax.curves.filtering), alone and at
+the defaults of reconstruct_curve."""
+
+import numpy as np
+import pytest
+
+import otjax
+from otjax import datasets, metrics
+from otjax.background import estimate_background
+from otjax.curves import filtering
+from otjax.curves.reconstruct import default_queue, EXHAUSTIVE_COLLAPSES
+
+
+def nearest_edge_ids(points, xy, keys):
+    d = np.stack([filtering.segment_sqdist(points, xy[a], xy[b]) for a, b in keys], 1)
+    k = d.argmin(1)
+    return [np.flatnonzero(k == i) for i in range(len(keys))]
+
+
+def test_segment_distance_matches_brute_force():
+    rng = np.random.default_rng(0)
+    p, a, b = rng.normal(size=(50, 2)), rng.normal(size=2), rng.normal(size=2)
+    t = np.linspace(0, 1, 20001)
+    brute = ((p[:, None] - (a + t[:, None] * (b - a))[None]) ** 2).sum(-1).min(1)
+    np.testing.assert_allclose(filtering.segment_sqdist(p, a, b), brute, rtol=1e-6, atol=1e-12)
+
+
+def test_the_chord_of_a_thin_triangle_goes():
+    rng = np.random.default_rng(1)
+    x = rng.random(400)
+    points = np.c_[x, 0.01 * rng.standard_normal(400)]
+    xy = np.array([[0.0, 0.0], [1.0, 0.0], [0.5, 0.03]])
+    keys = [(0, 1), (0, 2), (1, 2)]
+    kept = filtering.redundant_chords(keys, xy, nearest_edge_ids(points, xy, keys), points, np.ones(400))
+    assert kept.sum() == 2  # one edge goes, the cycle is broken
+    left = [k for k, keep in zip(keys, kept) if keep]
+    d = np.min([filtering.segment_sqdist(points, xy[a], xy[b]) for a, b in left], 0)
+    assert np.sqrt(d.mean()) < 0.03  # what is left still holds the points
+
+
+def test_a_true_triangle_keeps_its_sides():
+    rng = np.random.default_rng(2)
+    xy = np.array([[0.0, 0.0], [1.0, 0.0], [0.5, np.sqrt(3) / 2]])
+    keys = [(0, 1), (0, 2), (1, 2)]
+    side = rng.integers(0, 3, 600)
+    t = rng.random(600)
+    a, b = xy[np.array(keys)[side, 0]], xy[np.array(keys)[side, 1]]
+    points = a + t[:, None] * (b - a) + 0.02 * rng.standard_normal((600, 2))
+    kept = filtering.redundant_chords(keys, xy, nearest_edge_ids(points, xy, keys), points, np.ones(600))
+    assert kept.all()
+
+
+def test_no_background_keeps_everything():
+    rng = np.random.default_rng(3)
+    points = rng.random((100, 2))
+    seg = rng.random((5, 2, 2))
+    none = estimate_background(datasets.star(1000, noise=0.01)[0])
+    e, v = filtering.above_background(seg, rng.random((2, 2)), points, np.ones(100), none, 0.1)
+    assert e.all() and v.all()
+
+
+def test_a_band_of_background_alone_is_dropped():
+    rng = np.random.default_rng(4)
+    noise = rng.random((3000, 2))
+    line = np.c_[rng.random(1000) * 0.6 + 0.2, 0.5 + 0.003 * rng.standard_normal(1000)]
+    points = np.vstack([line, noise])
+    est = estimate_background(points)
+    assert est.found
+    seg = np.array([[[0.2, 0.5], [0.8, 0.5]], [[0.2, 0.2], [0.8, 0.25]]])
+    e, v = filtering.above_background(seg, np.array([[0.5, 0.8], [0.5, 0.5]]), points, np.ones(len(points)),
+                                      est, 0.01)
+    assert e.tolist() == [True, False] and v.tolist() == [False, True]
+
+
+# --------------------------------------------------------- at the defaults
+def output_segments(r):
+    return metrics.edges_to_segments(r.vertices, r.edges)
+
+
+@pytest.mark.parametrize("name", ["clean", "noise-1", "uneven"])
+def test_the_automatic_filter_keeps_every_edge_of_a_shape_without_outliers(name):
+    pts, truth = {"clean": lambda: datasets.star(400, noise=0.0, seed=0),
+                  "noise-1": lambda: datasets.star(400, noise=0.01, seed=1),
+                  "uneven": lambda: _uneven(800)}[name]()
+    auto = otjax.reconstruct_curve(pts, n_vertices=10, seed=0)
+    bare = otjax.reconstruct_curve(pts, n_vertices=10, seed=0, background="none")
+    assert auto.history["background_fraction"] == 0
+    np.testing.assert_array_equal(auto.edges, bare.edges)  # nothing was filtered
+    np.testing.assert_array_equal(auto.vertices, bare.vertices)
+    if name != "uneven":  # ten vertices cannot follow the sparse half: not the filter's doing
+        d = truth["diagonal"]
+        assert metrics.length_within(truth["segments"], output_segments(auto), 0.02 * d) > 0.97
+
+
+def _uneven(n):
+    pts, truth = datasets.star(n, noise=0.01, seed=2)
+    keep = (pts[:, 0] < 0) | (np.random.default_rng(9).random(len(pts)) < 0.1)
+    return pts[keep], truth
+
+
+def test_the_automatic_filter_removes_outlier_edges():
+    pts, truth = datasets.star(500, noise=0.02, seed=3)
+    mixed, truth = datasets.with_outliers(pts, truth, 500, margin=0.2, seed=4)
+    d = truth["diagonal"]
+    auto = otjax.reconstruct_curve(mixed, n_vertices=10, seed=0)
+    bare = otjax.reconstruct_curve(mixed, n_vertices=10, seed=0, background="none")
+    assert auto.history["background_fraction"] == pytest.approx(0.5, abs=0.1)
+    ours, theirs = output_segments(auto), output_segments(bare)
+
+    def in_background(segs):
+        # Edges whose ends and middle are all far from the shape.
+        probes = np.concatenate([segs, segs.mean(1, keepdims=True)], 1).reshape(-1, 2)
+        far = metrics.point_segment_distance(probes, truth["segments"]) > 0.05 * d
+        return int(far.reshape(len(segs), 3).all(1).sum())
+
+    assert in_background(ours) == 0 and in_background(theirs) >= 3
+    precision = metrics.length_within(ours, truth["segments"], 0.03 * d)
+    assert precision > max(0.5, 2 * metrics.length_within(theirs, truth["segments"], 0.03 * d))
+
+
+def test_the_size_rule_picks_the_documented_queue():
+    assert default_queue(EXHAUSTIVE_COLLAPSES + 10, 10) == "exhaustive"
+    assert default_queue(EXHAUSTIVE_COLLAPSES + 11, 10) == "multiple-choice"
+    assert default_queue(EXHAUSTIVE_COLLAPSES, None) == "exhaustive"
+    pts, _ = datasets.star(100, noise=0.01)
+    assert otjax.reconstruct_curve(pts, n_vertices=10).params["queue"] == "exhaustive"
+    assert otjax.reconstruct_curve(pts, n_vertices=10, queue="parallel").params["queue"] == "parallel"

@@ -1,0 +1,68 @@
+"""The background-noise estimate (otjax.background) against known mixtures."""
+
+import numpy as np
+import pytest
+
+from otjax import datasets
+from otjax.background import estimate_background
+
+
+def uneven_star(n=3000, noise=0.01, seed=0):
+    """A star whose right half is sampled ten times more sparsely than its left."""
+    pts, truth = datasets.star(n, noise=noise, seed=seed)
+    keep = (pts[:, 0] < 0) | (np.random.default_rng(seed + 7).random(len(pts)) < 0.1)
+    return pts[keep], truth
+
+
+@pytest.mark.parametrize("n_shape, n_outliers", [(600, 600), (3000, 3000), (3000, 1000)])
+def test_recovers_the_density_of_uniform_outliers(n_shape, n_outliers):
+    pts, truth = datasets.star(n_shape, noise=0.02, seed=3)
+    mixed, _ = datasets.with_outliers(pts, truth, n_outliers, margin=0.2, seed=4)
+    est = estimate_background(mixed)
+    # The outliers fill the bounding box of the mixture: that is the truth.
+    area = float(np.prod(mixed.max(0) - mixed.min(0)))
+    assert est.found
+    assert est.density == pytest.approx(n_outliers / area, rel=0.15)
+    assert est.fraction == pytest.approx(n_outliers / len(mixed), rel=0.15)
+    # The shape's points are mostly shape, the outliers mostly background.
+    p = est.probability
+    assert p[:n_shape].mean() < 0.35 < 0.6 < p[n_shape:].mean()
+
+
+@pytest.mark.parametrize("make", [
+    lambda: datasets.star(3000, noise=0.0, seed=0)[0],
+    lambda: datasets.star(3000, noise=0.01, seed=1)[0],
+    lambda: datasets.star(3000, noise=0.02, seed=2)[0],
+    lambda: uneven_star()[0],
+    lambda: datasets.skyline(2000, noise=0.01, seed=0)[0],
+    lambda: datasets.circle(200, noise=0.01, seed=0)[0],
+    lambda: datasets.junctions(2000, noise=0.005, seed=0)[0],
+], ids=["clean", "noise-1", "noise-2", "uneven", "skyline", "sparse-circle", "junctions"])
+def test_a_shape_without_outliers_has_no_background(make):
+    est = estimate_background(make())
+    assert not est.found and est.fraction == 0 and not est.probability.any()
+
+
+def test_does_not_depend_on_units():
+    pts, truth = datasets.star(1500, noise=0.02, seed=5)
+    mixed, _ = datasets.with_outliers(pts, truth, 1500, margin=0.2, seed=6)
+    a = estimate_background(mixed)
+    b = estimate_background(mixed * 1000.0 + 5.0)
+    assert b.fraction == pytest.approx(a.fraction, rel=1e-9)
+    assert b.density == pytest.approx(a.density / 1e6, rel=1e-9)
+    np.testing.assert_allclose(b.probability, a.probability, rtol=1e-9, atol=1e-12)
+
+
+def test_too_few_points_or_a_flat_box():
+    assert not estimate_background(np.random.default_rng(0).random((20, 2))).found
+    line = np.stack([np.linspace(0, 1, 500), np.zeros(500)], 1)
+    assert not estimate_background(line).found
+
+
+def test_fills_a_box_in_3d_too():
+    rng = np.random.default_rng(8)
+    plane = np.c_[rng.random((4000, 2)), 0.5 + 0.002 * rng.standard_normal(4000)]
+    noise = rng.random((1000, 3))
+    est = estimate_background(np.vstack([plane, noise]))
+    assert est.found and est.fraction == pytest.approx(1000 / 5000, rel=0.25)
+    assert not estimate_background(plane).found
