@@ -307,7 +307,6 @@ class _Example:
 _EXAMPLES = {
     "star": _Example("clean five-pointed star, 3000 points, 10 corners", "star", 3000, 0.0, 10),
     "noisy-star": _Example("five-pointed star, 3000 points, 1% noise", "star", 3000, 0.01, 10),
-    # relevance 0.0 is a placeholder until the outlier filter is tuned.
     "star-outliers": _Example(
         "five-pointed star, 3000 points, 2% noise, plus 3000 uniform outliers",
         shape="star",
