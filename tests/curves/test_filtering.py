@@ -79,7 +79,7 @@ def output_segments(r):
 
 @pytest.mark.parametrize("name", ["clean", "noise-1", "uneven"])
 def test_the_automatic_filter_keeps_every_edge_of_a_shape_without_outliers(name):
-    pts, truth = {"clean": lambda: datasets.star(400, noise=0.0, seed=0),
+    pts, truth = {"clean": lambda: datasets.star(250, noise=0.0, seed=0),
                   "noise-1": lambda: datasets.star(400, noise=0.01, seed=1),
                   "uneven": lambda: _uneven(800)}[name]()
     auto = otjax.reconstruct_curve(pts, n_vertices=10, seed=0)
