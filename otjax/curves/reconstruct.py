@@ -117,8 +117,7 @@ def reconstruct_curve(points, masses=None, n_vertices: int | None = None, *, tol
                            density=density, background=background, chords=chords, relocation=relocation, final_relocations=final_relocations,
                            refine=refine, queue=queue, choices=choices, round_fraction=round_fraction,
                            initial_vertices=initial_vertices, seed=seed, merge_duplicates=merge_duplicates)
-    noise = estimate_background(points) if params["background"] == "auto" else None
-    transported = masses * (1.0 - noise.probability) if noise is not None and noise.found else masses
+    noise, transported = _discount_background(points, masses, params["background"])
     # Point location is exact float64 arithmetic: the whole run is in JAX's
     # x64 mode, entered here, at the boundary, for its duration only.
     with jax.enable_x64(True):
@@ -133,6 +132,14 @@ def reconstruct_curve(points, masses=None, n_vertices: int | None = None, *, tol
                       "refine": run.refined,
                       "background_fraction": noise.fraction if noise is not None else 0.0}
     return result
+
+
+def _discount_background(points, masses, mode: str):
+    """``(background or None, masses scaled by each point's probability of being shape)``."""
+    if mode != "auto":
+        return None, masses
+    noise = estimate_background(points)
+    return noise, masses * (1.0 - noise.probability) if noise.found else masses
 
 
 def _check_params(n_points: int, *, n_vertices, tolerance, relevance, density, background, chords, relocation,
@@ -286,15 +293,9 @@ def vertex_and_edge_masses(plan: TransportPlan) -> tuple[dict, dict]:
 
 def _points_of(plan: TransportPlan, keys: list) -> list[np.ndarray]:
     """Per edge key of ``keys``, the ids of the points assigned to it."""
-    nv = len(plan.tri.xy)
-    code = plan.pt_edge[:, 0] * nv + plan.pt_edge[:, 1]
-    order = np.argsort(code, kind="stable")
-    sorted_code = code[order]
-    out = []
-    for a, b in keys:
-        lo, hi = np.searchsorted(sorted_code, [a * nv + b, a * nv + b + 1])
-        out.append(np.sort(order[lo:hi]))
-    return out
+    held, parts = plan.points_by_edge()
+    by_key = {(int(u), int(v)): p[0] for (u, v), p in zip(held, parts)}
+    return [by_key.get(k, np.zeros(0, np.int64)) for k in keys]
 
 
 def result_from_plan(plan: TransportPlan, relevance: float, params: dict, seconds: float,
