@@ -5,9 +5,11 @@ point file or a grayscale image; ``otjax curve --example star`` runs on a
 built-in synthetic shape, so the command works with no data at all.
 
 Bad input (unreadable file, NaN, duplicates, too many vertices, unknown output
-extension, ...) ends with one line ``otjax: error: <what is wrong>`` on stderr
-and exit status 1, before any output file is written; command-line usage
-errors exit with status 2 (argparse's convention).
+extension, missing output directory, ...) ends with one line ``otjax: error:
+<what is wrong>`` on stderr and exit status 1; output paths are checked before
+any work, and the outputs are written all or nothing, so a failed run leaves no
+file behind. Command-line usage errors exit with status 2 (argparse's
+convention).
 """
 
 from __future__ import annotations
@@ -19,8 +21,8 @@ from otjax import datasets
 from otjax.compile_cache import default_cache_dir, enable_compilation_cache
 from otjax.curves.decimate import QUEUES
 from otjax.curves.reconstruct import reconstruct_curve
-from otjax.curves.result import SAVE_EXTENSIONS, check_save_path
-from otjax.io import IMAGE_EXTENSIONS, TEXT_EXTENSIONS, read_points
+from otjax.curves.result import SAVE_EXTENSIONS
+from otjax.io import IMAGE_EXTENSIONS, TEXT_EXTENSIONS, check_output_paths, read_points, write_files
 from otjax.validation import check_points, check_target
 
 
@@ -56,9 +58,14 @@ def _curve_parser(sub) -> argparse.ArgumentParser:
         default=[],
         metavar="OUT",
         help=f"write the result; repeatable; extension one of {', '.join(SAVE_EXTENSIONS)}. "
-        "Without -o only a summary is printed",
+        "Without -o only a summary is printed. All outputs are written or none",
     )
-    p.add_argument("--tolerance", type=float, metavar="T", help="stop collapsing at this transport error")
+    p.add_argument("--mkdir", action="store_true",
+                   help="create missing directories of the outputs (otherwise a missing one is an error)")
+    p.add_argument("--tolerance", type=float, metavar="T",
+                   help="tolerance mode: no collapse may push an edge's RMS normal or tangential transport "
+                   "distance above T (input units). An RMS over the edge's points, not a maximum: single "
+                   "points can end up farther than T")
     p.add_argument("--relevance", type=float, metavar="R", help="drop edges less relevant than R")
     p.add_argument("--density", type=float, metavar="F",
                    help="drop edges whose mass per length is below F (0..1) times the largest")
@@ -167,7 +174,9 @@ def _run_curve(args, usage) -> int:
         return 0
     if args.input is None and args.example is None:
         usage("give an INPUT file, --example NAME or --list-examples")
-    outputs = [check_save_path(o) for o in args.output]  # all of them, before any work
+    # All of them, before any work: a run must not fail at its end on a typo.
+    outputs = check_output_paths(args.output, SAVE_EXTENSIONS, inputs=[args.input] if args.input else [],
+                                 mkdir=args.mkdir)
     points, masses, kwargs = _load(args, usage)
     # Fail fast with the input's own message, before the reconstruction starts
     # (reconstruct_curve checks again; this costs one sort of the points).
@@ -182,13 +191,22 @@ def _run_curve(args, usage) -> int:
             if not args.quiet:
                 print(f"otjax: warning: no compile cache ({err})", file=sys.stderr)
     result = reconstruct_curve(points, masses, **kwargs)
-    for path in outputs:
-        result.save(path)
+    write_files([(path, _render(result, path)) for path in outputs], mkdir=args.mkdir)
     if not args.quiet:
         print(result.summary())
+        if "cost_exponent" in result.params:
+            print(f"(the total cost in input units is {result.total_cost:.6g} x 2^{result.params['cost_exponent']})")
         for path in outputs:
             print(f"wrote {path}")
     return 0
+
+
+def _render(result, path):
+    """The file :meth:`CurveResult.save` would write at ``path``, in memory (``str`` or ``bytes``)."""
+    ext = path.suffix.lower()
+    if ext == ".json":
+        return result.to_json(indent=1) + "\n"
+    return result.to_svg() if ext == ".svg" else result.to_png()
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -258,6 +258,163 @@ def atomic_write(path, mode: str = "w"):
         raise
 
 
+def check_output_paths(paths, extensions, *, inputs=(), mkdir: bool = False) -> list[Path]:
+    """Checks output paths before any work, so that a run never fails at its end.
+
+    Each path must have one of ``extensions``, must not be an existing
+    directory, must not be given twice (after resolving ``..`` and symbolic
+    links) and must not be one of ``inputs``; its parent must be an existing
+    writable directory, or, with ``mkdir``, its nearest existing ancestor must
+    be one (the missing directories are created by :func:`write_files`).
+
+    Args:
+      paths: the output paths, in the order given.
+      extensions: accepted lower-case suffixes (``".json"``, ...).
+      inputs: input files the outputs must not overwrite.
+      mkdir: allow missing parent directories.
+
+    Returns:
+      The paths as :class:`Path` objects, in order.
+
+    Raises:
+      ValueError: naming the first offending path and what is wrong with it.
+    """
+    out = [Path(p) for p in paths]
+    for path in out:  # every extension first: a typo is the likeliest mistake
+        if path.suffix.lower() not in extensions:
+            raise ValueError(
+                f"{path}: unknown output extension {path.suffix!r}; expected one of {', '.join(extensions)}"
+            )
+    seen: dict[Path, Path] = {}
+    sources = [Path(p).resolve() for p in inputs]
+    for path in out:
+        if path.is_dir():
+            raise ValueError(f"{path}: output is an existing directory")
+        _check_output_directory(path, mkdir)
+        resolved = path.resolve()
+        if resolved in seen:
+            raise ValueError(f"{path}: the same output file is given twice (also as {seen[resolved]})")
+        seen[resolved] = path
+        for source in sources:
+            if resolved == source or (path.exists() and source.exists() and os.path.samefile(path, source)):
+                raise ValueError(f"{path}: output would overwrite the input file")
+    return out
+
+
+def _check_output_directory(path: Path, mkdir: bool) -> None:
+    parent = path.parent
+    missing = []
+    while not parent.exists():
+        if parent.is_symlink():
+            raise ValueError(f"{path}: {parent} is a broken symbolic link")
+        missing.append(parent)
+        if parent.parent == parent:
+            break
+        parent = parent.parent
+    if not parent.is_dir():
+        raise ValueError(f"{path}: {parent} is not a directory")
+    if missing and not mkdir:
+        raise ValueError(f"{path}: directory {path.parent} does not exist; create it or pass mkdir=True (CLI: --mkdir)")
+    if not os.access(parent, os.W_OK | os.X_OK):
+        raise ValueError(f"{path}: no permission to write in {parent}")
+
+
+def write_files(files, *, mkdir: bool = False) -> None:
+    """Writes several files all or nothing.
+
+    Every file goes to a temporary in its target directory first; only when
+    all are written are they renamed into place. On any failure (or
+    interrupt) the temporaries are removed, files already renamed are
+    rolled back (an existing file they replaced is restored) and directories
+    created here are removed, so nothing new remains.
+
+    Args:
+      files: ``(path, data)`` pairs; ``data`` is ``str`` (written as UTF-8)
+        or ``bytes``.
+      mkdir: create missing parent directories.
+    """
+    files = [(Path(p), d) for p, d in files]
+    created: list[Path] = []
+    temps: list[Path] = []
+    done: list[tuple[Path, Path | None, bool]] = []  # renamed: (path, backup of what it replaced, existed)
+    try:
+        for path, _ in files:
+            if mkdir:
+                created += _make_parents(path.parent)
+        for path, data in files:
+            temps.append(_write_temp(path, data))
+        for (path, _), tmp in zip(files, temps):
+            existed = path.exists()
+            backup = _backup(path) if existed else None
+            done.append((path, backup, existed))  # before the rename: a failed one is undone the same way
+            os.replace(tmp, path)
+    except BaseException:
+        for path, backup, existed in reversed(done):
+            with contextlib.suppress(OSError):
+                if backup is not None and os.path.samefile(backup, path):
+                    os.unlink(backup)  # not replaced yet (and rename() between two links to one file is a no-op)
+                elif backup is not None:
+                    os.replace(backup, path)
+                elif not existed:
+                    os.unlink(path)
+        for tmp in temps:
+            with contextlib.suppress(OSError):
+                os.unlink(tmp)
+        for directory in reversed(created):
+            with contextlib.suppress(OSError):
+                directory.rmdir()
+        raise
+    for _, backup, _ in done:
+        if backup is not None:
+            with contextlib.suppress(OSError):
+                os.unlink(backup)
+
+
+def _make_parents(directory: Path) -> list[Path]:
+    """Creates ``directory`` and its missing ancestors; returns those created, outermost first."""
+    missing = []
+    while not directory.exists():
+        missing.append(directory)
+        directory = directory.parent
+    for d in reversed(missing):
+        d.mkdir()
+    return list(reversed(missing))
+
+
+def _temp_name(path: Path, kind: str) -> Path:
+    return path.with_name(f".{path.name}.{secrets.token_hex(4)}.{kind}")
+
+
+def _write_temp(path: Path, data) -> Path:
+    while True:
+        tmp = _temp_name(path, "tmp")
+        try:
+            fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)  # the umask decides, as for open()
+            break
+        except FileExistsError:
+            continue
+    try:
+        with os.fdopen(fd, "wb") as f:
+            f.write(data.encode("utf-8") if isinstance(data, str) else data)
+            f.flush()
+            os.fsync(f.fileno())
+    except BaseException:
+        with contextlib.suppress(OSError):
+            os.unlink(tmp)
+        raise
+    return tmp
+
+
+def _backup(path: Path) -> Path | None:
+    """A hard link to the existing file at ``path``, to restore it on rollback."""
+    backup = _temp_name(path, "bak")
+    try:
+        os.link(path, backup)
+    except OSError:  # a file system without hard links: the old file cannot come back on rollback
+        return None
+    return backup
+
+
 def write_points(path, points, masses=None) -> None:
     """Writes points (and masses) as text that :func:`read_points` reads back exactly.
 

@@ -18,8 +18,14 @@ from otjax.predicates import orient
 # promises one exception type for bad input, which is what the CLI catches.
 
 
-def _as_float_array(value, name: str) -> np.ndarray:
-    """``value`` as a float64 array, refusing strings, booleans and complex numbers."""
+# Point and vertex ids travel as int32 in kernel buffers, and edge keys are packed as
+# a * n + b in int64: both hold for fewer than 2^31 points.
+MAX_POINTS = np.iinfo(np.int32).max
+
+
+def _as_float_array(value, name: str, copy: bool = True) -> np.ndarray:
+    """``value`` as a float64 array, refusing strings, booleans and complex numbers;
+    without ``copy`` an array of a real dtype comes back as it is (no copy yet)."""
     try:
         arr = np.asarray(value)
     except (TypeError, ValueError) as err:  # ragged nested lists
@@ -32,7 +38,7 @@ def _as_float_array(value, name: str) -> np.ndarray:
     elif arr.dtype.kind not in "iuf":
         # Booleans and complex numbers convert silently in NumPy; neither is a coordinate.
         raise ValueError(f"{name} must be an array of real numbers, got dtype {arr.dtype}")
-    return np.array(arr, dtype=np.float64)  # a copy: callers may keep theirs
+    return np.array(arr, dtype=np.float64) if copy else arr  # a copy: callers may keep theirs
 
 
 def _first_rows(mask: np.ndarray) -> tuple[int, int]:
@@ -65,6 +71,9 @@ def _all_collinear(points: np.ndarray) -> bool:
     three components of the cross product ``(b - a) x (p - a)`` are the 2D
     orientations of the projections on the coordinate planes.
     """
+    # A power-of-two scaling is exact and keeps every orientation sign; it keeps the
+    # float filter's products finite for coordinates near the ends of the float64 range.
+    points = np.ldexp(points, -int(np.frexp(np.abs(points).max())[1]))
     a = points[0]
     b = points[np.argmax(np.abs(points - a).sum(1))]  # any other point works; the farthest reads best
     planes = [(0, 1)] if points.shape[1] == 2 else [(0, 1), (1, 2), (0, 2)]
@@ -118,19 +127,24 @@ def check_points(
 
     Raises:
       ValueError: naming the problem (shape, too few points, NaN/inf, bad
-        masses, duplicate points, all points coincident or collinear).
+        masses, duplicate points, all points coincident; in 3D all points
+        collinear). Collinear 2D points are valid: the curve method's pinned
+        box corners make their triangulation well defined.
 
     Example:
       >>> p, m = check_points([[0, 0], [1, 0], [0, 1], [0, 1]], merge_duplicates=True)
       >>> p.shape, m.tolist()
       ((3, 2), [1.0, 1.0, 2.0])
     """
-    pts = _as_float_array(points, "points")
+    pts = _as_float_array(points, "points", copy=False)
     if pts.ndim != 2 or pts.shape[1] != dim:
         raise ValueError(f"points must have shape (n, {dim}), got shape {pts.shape}")
     n = len(pts)
     if n < min_points:
         raise ValueError(f"need at least {min_points} points, got {n}")
+    if n > MAX_POINTS:  # before the copy below
+        raise ValueError(f"at most {MAX_POINTS} points (int32 indices), got {n}")
+    pts = np.array(pts, dtype=np.float64)  # a copy: callers may keep theirs
     bad = ~np.isfinite(pts).all(1)
     if bad.any():
         count, first = _first_rows(bad)
@@ -154,11 +168,11 @@ def check_points(
         if len(pts) < min_points:
             raise ValueError(f"need at least {min_points} distinct points, got {len(pts)} after merging")
 
-    # Delaunay (scipy/Qhull) fails or degenerates on a line; say so here instead.
-    if dim in (2, 3) and _all_collinear(pts):
-        raise ValueError(
-            f"all {len(pts)} distinct points are collinear: the triangulation needs points that span the plane"
-        )
+    # In 2D the four pinned box corners span the plane whatever the points do, so
+    # collinear points (a segment, a polyline along one line) are valid input.
+    # A 3D complex needs more than a line.
+    if dim == 3 and _all_collinear(pts):
+        raise ValueError(f"all {len(pts)} distinct points are collinear: 3D reconstruction needs points off a line")
     return pts, mass
 
 

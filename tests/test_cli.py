@@ -151,7 +151,7 @@ def test_masses_column_is_passed(fake, tmp_path):
 
 def test_outputs_are_written(fake, square_file, tmp_path, capsys):
     outs = [tmp_path / "o" / "r.json", tmp_path / "o" / "r.svg", tmp_path / "o" / "r.png"]
-    argv = ["curve", str(square_file), "-n", "3"]
+    argv = ["curve", str(square_file), "-n", "3", "--mkdir"]
     for o in outs:
         argv += ["-o", str(o)]
     assert main(argv) == 0
@@ -238,7 +238,6 @@ BAD_FILES = {
     "negative mass": ("neg.xyz", "0 0 1\n1 0 -1\n0 1 1\n", "negative"),
     "zero mass": ("z.xyz", "0 0 0\n1 0 0\n0 1 0\n", "all zero"),
     "duplicates": ("d.xy", "0 0\n1 0\n0 1\n1 0\n", "--merge-duplicates"),
-    "collinear": ("l.xy", "0 0\n1 1\n2 2\n3 3\n", "collinear"),
     "coincident": ("o.xy", "2 2\n2 2\n2 2\n", "coincide"),
     "binary": ("b.xy", None, "UTF-8"),
     "unknown extension": ("u.ply2", "0 0\n", "unknown input extension"),
@@ -264,6 +263,13 @@ def test_bad_input_file(case, fake, tmp_path, capsys):
     assert main(["curve", str(path), "-n", "3", "-o", str(out)]) == 1
     assert words in one_error_line(capsys)
     assert not out.exists() and fake.calls == []
+
+
+def test_collinear_points_are_accepted(fake, tmp_path):
+    """The pinned box corners make a triangulation of points on one line well defined."""
+    path = _write(tmp_path / "l.xy", "0 0\n1 1\n2 2\n3 3\n")
+    assert main(["curve", str(path), "-n", "2", "--quiet"]) == 0
+    np.testing.assert_array_equal(fake.calls[0][0], [[0, 0], [1, 1], [2, 2], [3, 3]])
 
 
 def test_merge_duplicates_accepts_duplicates(fake, tmp_path):
@@ -314,8 +320,83 @@ def test_api_value_error_is_one_line(monkeypatch, square_file, tmp_path, capsys)
 def test_unwritable_output_is_an_error(fake, square_file, tmp_path, capsys):
     (tmp_path / "r.json").mkdir()  # a directory where the file should go
     assert main(["curve", str(square_file), "-n", "3", "-o", str(tmp_path / "r.json")]) == 1
-    one_error_line(capsys)
+    assert "existing directory" in one_error_line(capsys)
     assert os.listdir(tmp_path / "r.json") == []
+    assert fake.calls == []  # found before any work
+
+
+def tree(root):
+    """Every file and directory under ``root``, relative, sorted."""
+    return sorted(str(p.relative_to(root)) for p in root.rglob("*"))
+
+
+@pytest.mark.parametrize("out_exists", [True, False])
+def test_a_bad_second_output_fails_before_the_reconstruction_and_writes_nothing(
+        out_exists, fake, square_file, tmp_path, capsys):
+    """``-o out/good.json -o INPUT/x.json``: the second parent is a file, which is found before any work."""
+    if out_exists:
+        (tmp_path / "out").mkdir()
+    before = tree(tmp_path)
+    argv = ["curve", str(square_file), "-n", "3", "-o", str(tmp_path / "out" / "good.json"),
+            "-o", str(square_file / "x.json"), "--mkdir"]
+    assert main(argv) == 1
+    assert "not a directory" in one_error_line(capsys)
+    assert fake.calls == []
+    assert tree(tmp_path) == before
+
+
+def test_a_missing_output_directory_needs_mkdir(fake, square_file, tmp_path, capsys):
+    out = tmp_path / "a" / "b" / "r.json"
+    assert main(["curve", str(square_file), "-n", "3", "-o", str(out)]) == 1
+    line = one_error_line(capsys)
+    assert "does not exist" in line and "--mkdir" in line
+    assert fake.calls == [] and not (tmp_path / "a").exists()
+    assert main(["curve", str(square_file), "-n", "3", "-o", str(out), "--mkdir", "--quiet"]) == 0
+    assert json.loads(out.read_text())["params"] == {"n_vertices": 3}
+
+
+@pytest.mark.parametrize("second", ["o/r.json", "o/../o/./r.json", "link/r.json"])
+def test_the_same_output_twice_is_an_error(second, fake, square_file, tmp_path, capsys):
+    (tmp_path / "o").mkdir()
+    (tmp_path / "link").symlink_to(tmp_path / "o")
+    argv = ["curve", str(square_file), "-n", "3", "-o", str(tmp_path / "o" / "r.json"), "-o", str(tmp_path / second)]
+    assert main(argv) == 1
+    assert "given twice" in one_error_line(capsys)
+    assert fake.calls == [] and os.listdir(tmp_path / "o") == []
+
+
+def test_an_output_may_not_overwrite_the_input(fake, tmp_path, capsys):
+    import matplotlib.image
+
+    image = np.ones((4, 4))
+    image[1, 1] = image[2, 3] = image[3, 0] = 0.0
+    path = tmp_path / "dots.png"
+    matplotlib.image.imsave(path, image, cmap="gray", vmin=0, vmax=1)
+    content = path.read_bytes()
+    (tmp_path / "alias.png").symlink_to(path)
+    for out in (path, tmp_path / "." / "dots.png", tmp_path / "alias.png"):
+        assert main(["curve", str(path), "-n", "3", "--invert", "-o", str(out)]) == 1
+        assert "overwrite the input" in one_error_line(capsys)
+    assert fake.calls == [] and path.read_bytes() == content
+
+
+def test_a_failed_write_leaves_nothing_new(fake, square_file, tmp_path, monkeypatch, capsys):
+    """The reconstruction succeeds, the last output fails to render: no output appears, an old one is kept."""
+    (tmp_path / "o").mkdir()
+    old = tmp_path / "o" / "r.json"
+    old.write_text("old")
+
+    def broken(self, *args, **kwargs):
+        raise OSError("disk full")
+
+    monkeypatch.setattr(CurveResult, "to_png", broken)
+    argv = ["curve", str(square_file), "-n", "3", "-o", str(old), "-o", str(tmp_path / "o" / "r.svg"),
+            "-o", str(tmp_path / "new" / "r.png"), "--mkdir"]
+    assert main(argv) == 1
+    assert "disk full" in one_error_line(capsys)
+    assert len(fake.calls) == 1
+    assert tree(tmp_path / "o") == ["r.json"] and old.read_text() == "old"
+    assert not (tmp_path / "new").exists()
 
 
 @pytest.mark.parametrize(

@@ -1,12 +1,14 @@
 """Point files, images and atomic writes."""
 
 import os
+from pathlib import Path
 
 import matplotlib.image
 import numpy as np
 import pytest
 
-from otjax.io import atomic_write, image_to_points, read_image, read_points, write_points
+from otjax.io import (atomic_write, check_output_paths, image_to_points, read_image, read_points, write_files,
+                      write_points)
 
 
 @pytest.mark.parametrize("ext", [".xy", ".xyz", ".xym", ".csv", ".txt"])
@@ -249,4 +251,98 @@ def test_write_points_rejects_bad_shapes(tmp_path):
         write_points(tmp_path / "p.xy", np.zeros((3, 3)))
     with pytest.raises(ValueError, match="masses"):
         write_points(tmp_path / "p.xy", np.zeros((3, 2)), np.ones(2))
+    assert _leftovers(tmp_path) == []
+
+
+EXTS = (".json", ".svg")
+
+
+def test_check_output_paths_accepts_good_paths(tmp_path):
+    (tmp_path / "old.json").write_text("x")  # an existing file is replaced, not refused
+    paths = [tmp_path / "a.json", str(tmp_path / "old.json"), tmp_path / "new" / "deeper" / "b.svg"]
+    assert check_output_paths(paths, EXTS, mkdir=True) == [tmp_path / "a.json", tmp_path / "old.json",
+                                                          tmp_path / "new" / "deeper" / "b.svg"]
+    assert not (tmp_path / "new").exists()  # checking creates nothing
+
+
+@pytest.mark.parametrize(
+    ("outputs", "mkdir", "words"),
+    [
+        (["r.json", "r.pdf"], False, ["r.pdf", "unknown output extension"]),
+        (["missing/r.json"], False, ["missing", "does not exist", "--mkdir"]),
+        (["file.txt/r.json"], True, ["file.txt", "not a directory"]),
+        (["file.txt/sub/r.json"], True, ["file.txt", "not a directory"]),
+        (["dir.json"], False, ["existing directory"]),
+        (["r.json", "dir.json/../r.json"], False, ["given twice"]),
+        (["in.json"], False, ["overwrite the input"]),
+        (["hardlink.json"], False, ["overwrite the input"]),
+    ],
+)
+def test_check_output_paths_rejects(tmp_path, outputs, mkdir, words):
+    (tmp_path / "file.txt").write_text("x")
+    (tmp_path / "dir.json").mkdir()
+    (tmp_path / "in.json").write_text("{}")
+    os.link(tmp_path / "in.json", tmp_path / "hardlink.json")
+    before = _leftovers(tmp_path)
+    with pytest.raises(ValueError) as info:
+        check_output_paths([tmp_path / o for o in outputs], EXTS, inputs=[tmp_path / "in.json"], mkdir=mkdir)
+    for word in words:
+        assert word in str(info.value)
+    assert _leftovers(tmp_path) == before
+
+
+def test_check_output_paths_rejects_a_read_only_directory(tmp_path, monkeypatch):
+    # access(2) itself, not file modes: root may write to a mode-0500 directory.
+    real = os.access
+    monkeypatch.setattr(os, "access", lambda p, mode: Path(p) != tmp_path / "ro" and real(p, mode))
+    (tmp_path / "ro").mkdir()
+    with pytest.raises(ValueError, match="no permission to write in .*ro"):
+        check_output_paths([tmp_path / "ro" / "r.json"], EXTS)
+    with pytest.raises(ValueError, match="no permission to write in .*ro"):
+        check_output_paths([tmp_path / "ro" / "new" / "r.json"], EXTS, mkdir=True)
+
+
+def test_write_files_writes_all_and_creates_directories_when_asked(tmp_path):
+    a, b = tmp_path / "a.txt", tmp_path / "x" / "y" / "b.bin"
+    a.write_text("old")
+    write_files([(a, "new ü"), (b, b"\x00\x01")], mkdir=True)
+    assert a.read_text(encoding="utf-8") == "new ü" and b.read_bytes() == b"\x00\x01"
+    assert _leftovers(tmp_path) == ["a.txt", "x"] and _leftovers(b.parent) == ["b.bin"]
+
+
+def test_write_files_without_mkdir_does_not_create_directories(tmp_path):
+    with pytest.raises(FileNotFoundError):
+        write_files([(tmp_path / "a.txt", "a"), (tmp_path / "missing" / "b.txt", "b")])
+    assert _leftovers(tmp_path) == []
+
+
+@pytest.mark.parametrize("fail_at", [0, 1, 2])
+def test_write_files_rolls_back_every_rename(tmp_path, monkeypatch, fail_at):
+    """A failure at the k-th rename: the first k files are undone (an old one restored), temporaries removed."""
+    old = tmp_path / "old.txt"
+    old.write_text("old")
+    files = [(old, "replaced"), (tmp_path / "d" / "new.txt", "new"), (tmp_path / "e" / "f" / "last.txt", "last")]
+    real = os.replace
+    calls = []
+
+    def failing(src, dst):
+        calls.append(dst)
+        if len(calls) == fail_at + 1:
+            raise OSError("rename failed")
+        return real(src, dst)
+
+    monkeypatch.setattr(os, "replace", failing)
+    with pytest.raises(OSError, match="rename failed"):
+        write_files(files, mkdir=True)
+    monkeypatch.setattr(os, "replace", real)
+    assert _leftovers(tmp_path) == ["old.txt"] and old.read_text() == "old"
+
+
+def test_write_files_interrupted_while_writing_leaves_nothing(tmp_path, monkeypatch):
+    def explode(*args):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(os, "fsync", explode)
+    with pytest.raises(KeyboardInterrupt):
+        write_files([(tmp_path / "a.txt", "a"), (tmp_path / "sub" / "b.txt", "b")], mkdir=True)
     assert _leftovers(tmp_path) == []

@@ -47,29 +47,53 @@ TRIANGLE = [[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]]
         ),
         ([[0, 0], [1, 0], [0, 1], [1, 0]], None, ["--merge-duplicates"]),
         ([[2, 3]] * 5, None, ["all 5 points coincide"]),
-        ([[0, 0], [1, 1], [2, 2], [-3, -3]], None, ["collinear"]),
     ],
 )
 def test_bad_points_raise_value_error_naming_the_problem(points, masses, words):
     assert_rejected(check_points, (points, masses), words)
 
 
-def test_collinearity_is_exact():
+@pytest.mark.parametrize("scale", [1.0, 2.0**-1000, 1e-300, 1e300])
+def test_collinear_points_are_valid_in_2d(scale):
+    """The pinned box corners make the triangulation of points on a line well defined."""
+    line = np.array([[0.0, 0.0], [1.0, 1.0], [2.0, 2.0], [-3.0, -3.0]]) * scale
+    out, m = check_points(line)
+    np.testing.assert_array_equal(out, line)
+    np.testing.assert_array_equal(m, np.ones(4))
+    horizontal = np.array([[0.0, 5.0], [1.0, 5.0], [7.0, 5.0]])
+    np.testing.assert_array_equal(check_points(horizontal)[0], horizontal)
+    out, m = check_points([[0, 0], [1, 1], [0, 0], [2, 2]], merge_duplicates=True)
+    np.testing.assert_array_equal(out, [[0, 0], [1, 1], [2, 2]])
+    np.testing.assert_array_equal(m, [2, 1, 1])
+
+
+def test_collinearity_is_exact_in_3d():
     # One ulp off a line is not collinear: a rank test with a tolerance (SVD,
     # relative threshold) would call this set collinear and reject valid input.
-    exact_collinear = np.array([[0.0, 0.0], [0.5, 0.25], [2.0, 1.0], [-4.0, -2.0]])
+    exact_collinear = np.array([[0.0, 0.0, 0.0], [0.5, 0.25, 1.0], [2.0, 1.0, 4.0], [-4.0, -2.0, -8.0]])
     with pytest.raises(ValueError, match="collinear"):
-        check_points(exact_collinear)
+        check_points(exact_collinear, dim=3)
     nudged = exact_collinear.copy()
     nudged[1, 1] = np.nextafter(0.25, 1.0)  # one ulp off the line
-    out, _ = check_points(nudged)
+    out, _ = check_points(nudged, dim=3)
     np.testing.assert_array_equal(out, nudged)
 
 
-def test_collinear_after_merging_is_rejected():
-    pts = [[0, 0], [1, 1], [0, 0], [2, 2]]
+@pytest.mark.parametrize("scale", [1.0, 1e-300, 1e300, 2.0**-1070])
+def test_collinearity_in_3d_at_any_scale(scale):
+    """The exact test sees through a power-of-two rescaling: no overflow or underflow near the float64 ends."""
+    line = np.array([[0.0, 0.0, 0.0], [1.0, 2.0, 3.0], [2.0, 4.0, 6.0]]) * scale
     with pytest.raises(ValueError, match="collinear"):
-        check_points(pts, merge_duplicates=True)
+        check_points(line, dim=3)
+    off = line.copy()
+    off[2, 2] = np.nextafter(off[2, 2], np.inf)
+    check_points(off, dim=3)
+
+
+def test_collinear_after_merging_is_rejected_in_3d():
+    pts = [[0, 0, 0], [1, 1, 1], [0, 0, 0], [2, 2, 2]]
+    with pytest.raises(ValueError, match="collinear"):
+        check_points(pts, dim=3, merge_duplicates=True)
 
 
 def test_too_few_after_merging_is_rejected():

@@ -241,17 +241,27 @@ def _float_order_key(t: jax.Array) -> jax.Array:
     return jnp.where(bits < 0, bits ^ jnp.iinfo(int_type).max, bits)
 
 
+def exact_key_type(num_bins: int, n: int, x64: bool):
+    """Integer type of :func:`_sort_order_exact`'s packed key ``(edge n + rank) n + index``,
+    whose largest value is ``num_bins n^2 - 1``; ``None`` when no integer type of
+    the mode holds it (the caller then sorts by two keys). Python integers: exact."""
+    top = num_bins * n * n - 1
+    if top <= np.iinfo(np.int32).max:
+        return jnp.int32
+    if x64 and top <= np.iinfo(np.int64).max:
+        return jnp.int64
+    return None
+
+
 def _sort_order_exact(edge: jax.Array, t: jax.Array, num_bins: int) -> jax.Array:
-    """:func:`sort_order` by two integer sorts and a binary search."""
+    """:func:`sort_order` by two integer sorts and a binary search (a two-key
+    sort when the packed key would overflow)."""
     n = t.shape[0]
+    key_type = exact_key_type(num_bins, n, jax.config.jax_enable_x64)
+    if key_type is None:
+        return _sort_order_lex(edge, t)
     key_t = _float_order_key(t)
     rank_t = jnp.searchsorted(jnp.sort(key_t), key_t, side="left")
-    if num_bins * n * n <= np.iinfo(np.int32).max:
-        key_type = jnp.int32
-    elif jax.config.jax_enable_x64:
-        key_type = jnp.int64
-    else:
-        raise ValueError(f"{num_bins} bins x {n}^2 points overflow int32 keys; enable x64")
     idx = jnp.arange(n, dtype=key_type)
     key = (edge.astype(key_type) * n + rank_t.astype(key_type)) * n + idx
     return (jnp.sort(key) % n).astype(jnp.int32)
@@ -305,7 +315,9 @@ def sort_order(edge: jax.Array, t: jax.Array, num_bins: int) -> jax.Array:
     into one such key, ``t`` quantised per edge with an exact fallback
     (:func:`_sort_order_quantized`; 2.5x faster at 32k points, measured);
     otherwise ``t`` is ranked through its integer order key (one keys-only
-    sort and a binary search) and ``(edge, rank, index)`` sorted.
+    sort and a binary search) and ``(edge, rank, index)`` sorted, by one
+    packed key where an integer type holds it (:func:`exact_key_type`), else
+    by a two-key sort.
 
     Args:
       edge: ``(P,)`` int in ``[0, num_bins)``.
@@ -314,8 +326,13 @@ def sort_order(edge: jax.Array, t: jax.Array, num_bins: int) -> jax.Array:
 
     Returns:
       ``(P,)`` int32 permutation.
+
+    Raises:
+      ValueError: ``P`` or ``num_bins`` beyond int32 indices.
     """
     n = t.shape[0]
+    if n > np.iinfo(np.int32).max or num_bins > np.iinfo(np.int32).max:  # sizes, not only indices, are int32
+        raise ValueError(f"a stencil of {n} points in {num_bins} bins exceeds the int32 indices of the sort")
     q_bits = 62 - max(n - 1, 1).bit_length() - max(num_bins - 1, 1).bit_length()
     if jax.config.jax_enable_x64 and q_bits >= 20:
         return _sort_order_quantized(edge, t, num_bins, min(q_bits, 52))

@@ -161,6 +161,8 @@ def _local_edges(jobs: list[Job], tris: np.ndarray, tri_start: np.ndarray, xy: n
     """
     nv = len(xy)
     nj = len(jobs)
+    if nj * nv * nv > np.iinfo(np.int64).max:  # the (job, a, b) code below must not wrap
+        raise ValueError(f"{nj} jobs over {nv} vertices overflow the int64 edge code; use fewer initial vertices")
     tri_job = np.repeat(np.arange(nj), np.diff(tri_start))
     e = triangle_edges(tris)  # (T, 3, 2)
     code = (np.repeat(tri_job, 3) * nv + e[..., 0].ravel()) * nv + e[..., 1].ravel()

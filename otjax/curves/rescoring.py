@@ -187,6 +187,9 @@ class LinkUpdates:
         inside = self.stencils.region(cand.plan.source).inside
         if len(inside) != n:
             raise RuntimeError("the region changed since the candidate was exported")
+        if len(cand.keys) > np.iinfo(np.int16).max:  # local triangles <= local edges: both fit int16
+            raise ValueError(f"a stencil of {len(cand.keys)} local edges overflows the int16 record; "
+                             "lower max_source_degree")
         return self._record(cand.plan, cand.keys, np.asarray(scored.edge_cost, np.float64), inside,
                             scored.triangle[:n].astype(np.int16), scored.assignment[:n].astype(np.int16))
 
