@@ -14,7 +14,7 @@ install: $(BIN)/activate
 
 # The main job on a built-in example: 1000 noisy points of a star -> 10 vertices.
 demo: install
-	$(BIN)/otjax curve --example noisy-star --points 1000 -o out/noisy-star.png -o out/noisy-star.svg \
+	$(BIN)/otjax curve --example noisy-star --points 1000 --mkdir -o out/noisy-star.png -o out/noisy-star.svg \
 		-o out/noisy-star.json
 
 # The layer rules (pyproject.toml's import-linter contracts), then the suite.
