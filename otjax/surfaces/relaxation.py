@@ -24,6 +24,10 @@ from otjax.surfaces.plan import SurfacePlan
 #: stops (the paper's threshold).
 TOLERANCE = 1e-5
 MAX_SWEEPS = 10
+#: A local solution replaces the plan only if it lowers the stencil's cost by
+#: more than this fraction: an equal-cost rewrite gains nothing and would
+#: mark the neighbours for another solve.
+GAIN = 1e-12
 
 
 class LocalSolution(NamedTuple):
@@ -113,7 +117,8 @@ def relax(plan: SurfacePlan, solve: Solver, stencil_of: StencilRule | None = Non
 
     Returns:
       :class:`RelaxationStats`. The total cost never rises: a local solution
-      is written back only if it costs no more than what it replaces.
+      is written back only if it costs less than what it replaces. Stencils
+      whose simplices did not change since their last solve are skipped.
     """
     rule = stencil_of or facet_ring(plan.complex)
     centres = sorted(plan.complex.triangles) if centres is None else list(centres)
@@ -122,10 +127,20 @@ def relax(plan: SurfacePlan, solve: Solver, stencil_of: StencilRule | None = Non
     total = plan.total_cost()
     costs = [total]
     solves = accepted = n_rounds = unconverged = 0
+    # A stencil's LP depends only on the entries of its simplices: one whose
+    # simplices did not change since it was last solved would give the same
+    # answer again, so it is skipped (exactly).
+    changed_at: dict = {}
+    solved_at = np.full(len(centres), -1)
+    clock = 0
     for _ in range(max_sweeps):
-        order = rng.permutation(len(centres))
+        order = [i for i in rng.permutation(len(centres))
+                 if solved_at[i] < 0 or _last_change(changed_at, simplices[i]) > solved_at[i]]
         for members in rounds_of([simplices[i][0] for i in order]):
-            cut = [plan.stencil(*simplices[order[i]]) for i in members]
+            clock += 1
+            ids = [order[i] for i in members]
+            solved_at[ids] = clock
+            cut = [plan.stencil(*simplices[i]) for i in ids]
             cut = [s for s in cut if len(s.points)]
             if not cut:
                 continue
@@ -137,11 +152,18 @@ def relax(plan: SurfacePlan, solve: Solver, stencil_of: StencilRule | None = Non
                     continue
                 unconverged += sol.status != CONVERGED
                 written = plan.sparsified(stencil, sol.plan)
-                if float(np.sum(written * stencil.lp.cost)) <= stencil.cost:
+                if float(np.sum(written * stencil.lp.cost)) < stencil.cost * (1.0 - GAIN):
                     plan.assign(stencil, written)
                     accepted += 1
+                    for key in stencil.vertices + stencil.facets:
+                        changed_at[key] = clock
         previous, total = total, plan.total_cost()
         costs.append(total)
         if previous - total <= tolerance * previous:
             break
     return RelaxationStats(tuple(costs), solves, accepted, n_rounds, unconverged)
+
+
+def _last_change(changed_at: dict, stencil) -> int:
+    vertices, facets = stencil
+    return max((changed_at.get(k, -1) for k in (*vertices, *facets)), default=-1)
