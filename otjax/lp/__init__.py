@@ -1,0 +1,1 @@
+"""Local optimal-transport LPs, shared by every dimension; knows no mesh."""
