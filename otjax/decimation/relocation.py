@@ -14,7 +14,8 @@ def relocate(engine, vertices, veto: Callable | None = None) -> tuple[set[int], 
     The result is that of visiting the vertices one at a time, each proposal
     made and scored on the state the moves before it left; the work is
     batched: the proposals of a prefix of the waiting vertices that lie
-    more than two edges apart are made and scored in one call, then applied
+    more than two edges apart (paths through immovable vertices do not
+    count) are made and scored in one call, then applied
     in order (a vertex that an applied move made dirty after all ends the
     prefix early, and the next call resumes there).
 
@@ -53,7 +54,7 @@ def relocate(engine, vertices, veto: Callable | None = None) -> tuple[set[int], 
 
 def _independent_prefix(engine, waiting: list[int]) -> list[int]:
     """The longest prefix of ``waiting`` in which no vertex is within two
-    edges of an earlier one: a move dirties at most its vertex's neighbours
+    edges of an earlier one through a movable vertex: a move dirties at most its vertex's neighbours
     and the vertices across its link, so the proposals of such a prefix,
     made on one state, are those that visiting it in order would make.
     (A vertex across a link edge from ``v`` is in the ring of that edge's
