@@ -9,7 +9,7 @@ The map, for points in a bounding box of diagonal ``D``:
 
 * ``q = p / s - c / s`` with ``s = 2^scale_exp`` the smallest power of two
   ``>= D`` (the canonical diagonal is in ``(1/2, 1]``) and ``c`` the box
-  centre rounded to a multiple of ``s / 2^CENTRE_BITS``;
+  centre rounded down to a multiple of ``s / 2^CENTRE_BITS``;
 * masses ``m / 2^mass_exp`` with the largest in ``[1/2, 1)``;
 * back: vertices ``q s + c``, masses ``x 2^mass_exp``, lengths ``x s``,
   costs (mass times squared length) ``x s^2 2^mass_exp``.
@@ -38,7 +38,9 @@ from typing import NamedTuple
 import numpy as np
 
 # The centre sits on a grid of s / 2^CENTRE_BITS: coarse enough that a translation by
-# a multiple of it moves the centre exactly, fine enough that q stays within 1/2 + 2^-11.
+# a multiple of it moves the centre exactly, fine enough that |q| stays below 1/2 + 2^-10.
+# Rounded down, not to nearest: floor(x + N) = floor(x) + N for an integer N, while
+# round-half-even may break a tie the other way after a translation.
 CENTRE_BITS = 10
 # Input coordinates must stay below this so that results in input units (vertices up to
 # a box diagonal outside the points) cannot overflow.
@@ -50,7 +52,7 @@ class Frame(NamedTuple):
     """A canonical frame (see the module doc).
 
     Attributes:
-      centre: ``(d,)`` float64, the rounded box centre, in input units.
+      centre: ``(d,)`` float64, the box centre rounded down to the grid, in input units.
       scale_exp: ``s = 2^scale_exp`` (kept as an exponent: ``s`` itself may
         not be a finite float64).
       mass_exp: the mass unit is ``2^mass_exp``.
@@ -122,8 +124,12 @@ def canonical_frame(points: np.ndarray, masses: np.ndarray) -> Frame:
             f"coordinates up to {big:.3g} in magnitude are out of range: results near the points "
             f"must stay finite in float64, so |x| must be below 2^1022 ({MAX_COORDINATE:.3g})"
         )
-    lo, hi = points.min(0), points.max(0)
-    half = hi / 2 - lo / 2  # halves first: hi - lo may overflow
+    # The parameters are computed on an exact power-of-two rescaling with the largest |x| in
+    # [1/2, 1): halving a subnormal loses its last bit, and hi - lo may overflow.
+    e_big = int(np.frexp(big)[1])
+    unit = np.ldexp(points, -e_big)
+    lo, hi = unit.min(0), unit.max(0)
+    half = hi / 2 - lo / 2
     widest = float(half.max())
     if not widest > 0:
         raise ValueError("all points coincide: the bounding box has no extent")
@@ -131,14 +137,15 @@ def canonical_frame(points: np.ndarray, masses: np.ndarray) -> Frame:
     # The half diagonal as (norm of exactly normalised half extents) * 2^e_wide: the exponent
     # chosen depends only on the normalised values, so it follows a power-of-two scaling exactly.
     half_diag = float(np.linalg.norm(np.ldexp(half, -e_wide)))
-    scale_exp = e_wide + _power_of_two_at_least(half_diag) + 1
+    scale_exp = e_wide + _power_of_two_at_least(half_diag) + 1  # of unit's box
     mid = lo / 2 + hi / 2
-    grid_exp = scale_exp - CENTRE_BITS
+    grid_exp = max(scale_exp - CENTRE_BITS, -1074 - e_big)  # a grid float64 holds in input units
     centre = mid.copy()
-    # |mid| >= 2^53 grid: mid is already a multiple of the grid (and the ldexp below would
-    # overflow for a tiny box far from the origin).
+    # |mid| >= 2^53 grid: mid is already a multiple of the grid.
     near = np.frexp(mid)[1] <= 53 + grid_exp  # |mid| < 2^(53 + grid_exp), compared in exponents
-    centre[near] = np.ldexp(np.rint(np.ldexp(mid[near], -grid_exp)), grid_exp)
+    centre[near] = np.ldexp(np.floor(np.ldexp(mid[near], -grid_exp)), grid_exp)
+    centre = np.ldexp(centre, e_big)  # exact: a multiple of 2^(grid_exp + e_big) >= 2^-1074
+    scale_exp += e_big
     return Frame(centre, scale_exp, _mass_exp(masses))
 
 
