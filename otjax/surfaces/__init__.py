@@ -4,6 +4,10 @@ half-edge collapse, and the facet bins of the discretised transport.
 Topology and bins are NumPy only; cost kernels live in their own modules.
 """
 
+from otjax.surfaces.bins import FacetBins, bin_positions, facet_bins
 from otjax.surfaces.complex import CollapseChange, ComplexArrays, LocalComplex, SimplicialComplex
 
-__all__ = ["CollapseChange", "ComplexArrays", "LocalComplex", "SimplicialComplex"]
+__all__ = [
+    "CollapseChange", "ComplexArrays", "FacetBins", "LocalComplex", "SimplicialComplex", "bin_positions",
+    "facet_bins",
+]
