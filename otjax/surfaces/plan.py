@@ -111,6 +111,22 @@ class SurfacePlan:
         self.ensure_bins(complex_.triangles)
         self._nearest_vertex()
 
+    @classmethod
+    def from_entries(cls, complex_: SimplicialComplex, points: np.ndarray, masses: np.ndarray,
+                     settings: BinSettings, bins: dict, vertex_entries: dict, facet_entries: dict) -> "SurfacePlan":
+        """A plan with the given bins and entries (no nearest-vertex start);
+        facets of ``complex_`` without bins get them made."""
+        plan = cls.__new__(cls)
+        plan.complex = complex_
+        plan.points = np.asarray(points, np.float64)
+        plan.masses = np.asarray(masses, np.float64)
+        plan.settings = settings
+        plan.bins = dict(bins)
+        plan.vertex_entries = dict(vertex_entries)
+        plan.facet_entries = dict(facet_entries)
+        plan.ensure_bins(complex_.triangles)
+        return plan
+
     # ------------------------------------------------------------- bins
     def ensure_bins(self, facets: Iterable[Triangle]) -> None:
         """Makes the bins of the given facets that have none yet (in one call)."""

@@ -1,0 +1,97 @@
+"""The initial complex (§4.1) on small inputs with a known surface."""
+
+import numpy as np
+import pytest
+from scipy.spatial import cKDTree
+
+from otjax.surfaces.initial_complex import (box_corners, initial_complex, sample_subset, tetrahedra,
+                                            tetrahedra_facets, two_tetrahedra_rule)
+from otjax.surfaces.solvers import exact_solver
+
+
+def crossing_planes(n, rng):
+    """Points on z = 0.5 and on y = 0.5 over the unit square: two planes crossing at a line."""
+    h = n // 2
+    a, b = rng.random((h, 2)), rng.random((n - h, 2))
+    return np.r_[np.c_[a[:, 0], a[:, 1], np.full(h, 0.5)], np.c_[b[:, 0], np.full(n - h, 0.5), b[:, 1]]]
+
+
+def facet_samples(vertices, triangles, per_facet=20, rng=None):
+    rng = rng or np.random.default_rng(0)
+    r = rng.random((len(triangles), per_facet, 2))
+    flip = r.sum(-1) > 1
+    r[flip] = 1 - r[flip]
+    v = vertices[triangles]
+    return (v[:, None, 0] + r[..., :1] * (v[:, None, 1] - v[:, None, 0])
+            + r[..., 1:] * (v[:, None, 2] - v[:, None, 0])).reshape(-1, 3)
+
+
+@pytest.fixture(scope="module")
+def cross():
+    rng = np.random.default_rng(7)
+    pts = crossing_planes(360, rng)
+    return pts, initial_complex(pts, np.ones(len(pts)), exact_solver, max_sweeps=2, seed=3)
+
+
+def test_two_tetrahedra_stencil_of_an_inside_facet_has_seven_facets_and_five_vertices(rng):
+    tets = tetrahedra(rng.random((40, 3)))
+    rule = two_tetrahedra_rule(tets)
+    facets = tetrahedra_facets(tets)
+    shared = {tuple(f) for f in facets.tolist()}
+    sizes = {}
+    for f in map(tuple, facets.tolist()):
+        vertices, around = rule(f)
+        assert f in around and set(f) <= set(vertices)
+        assert set(around) <= shared
+        sizes.setdefault((len(around), len(vertices)), 0)
+        sizes[(len(around), len(vertices))] += 1
+    # hull facets bound one tetrahedron (4 facets, 4 vertices), inside ones two
+    assert set(sizes) == {(4, 4), (7, 5)}
+    hull = sum(1 for f in map(tuple, facets.tolist()) if len(rule(f)[1]) == 4)
+    assert 4 * len(tets) == hull + 2 * (len(facets) - hull)
+
+
+def test_subset_is_seeded_and_box_corners_enclose_flat_input(rng):
+    a, b = sample_subset(1000, 0.15, seed=5), sample_subset(1000, 0.15, seed=5)
+    assert np.array_equal(a, b) and len(a) == 150 and len(np.unique(a)) == 150
+    assert not np.array_equal(a, sample_subset(1000, 0.15, seed=6))
+    flat = np.c_[rng.random((50, 2)), np.zeros(50)]
+    corners = box_corners(flat)
+    assert np.all(corners.min(0) < flat.min(0)) and np.all(corners.max(0) > flat.max(0))
+    with pytest.raises(ValueError, match="Delaunay"):
+        tetrahedra(flat)
+    assert len(tetrahedra(np.vstack([flat, corners]))) > 0
+
+
+def test_every_point_is_transported_and_only_facets_with_mass_are_kept(cross):
+    pts, ic = cross
+    plan = ic.plan
+    np.testing.assert_allclose(plan.point_mass(), 1.0, rtol=1e-12)
+    assert set(plan.facet_entries) == plan.complex.triangles
+    assert all(plan.simplex_mass(t) > 0 for t in plan.complex.triangles)
+    # every vertex of the kept complex is a subset point or carries mass
+    for v in np.flatnonzero(plan.complex.alive):
+        assert ic.vertex_points[v] >= 0 or plan.simplex_mass(int(v)) > 0
+    # kept vertices sit at the input points they came from
+    real = ic.vertex_points >= 0
+    np.testing.assert_array_equal(plan.complex.positions[real], pts[ic.vertex_points[real]])
+    costs = ic.relaxation.costs
+    assert all(b <= a for a, b in zip(costs, costs[1:])) and costs[-1] < 0.7 * costs[0]
+    assert plan.total_cost() == pytest.approx(costs[-1], rel=1e-9)
+    assert ic.delaunay_facets > 3 * plan.complex.n_triangles
+
+
+def test_crossing_planes_are_both_covered_by_facets_near_them(cross):
+    pts, ic = cross
+    arrays = ic.plan.complex.to_arrays()
+    d = float(np.linalg.norm(np.ptp(pts, axis=0)))
+    centroids = arrays.vertices[arrays.triangles].mean(axis=1)
+    off = np.minimum(np.abs(centroids[:, 2] - 0.5), np.abs(centroids[:, 1] - 0.5))
+    assert np.median(off) < 0.01 * d
+    on_z = np.abs(centroids[:, 2] - 0.5) < 0.01 * d
+    on_y = np.abs(centroids[:, 1] - 0.5) < 0.01 * d
+    assert on_z.sum() >= 10 and on_y.sum() >= 10
+    # most of each plane's points are within 2% D of a kept facet
+    near = cKDTree(facet_samples(arrays.vertices, arrays.triangles)).query(pts)[0]
+    for plane in (np.abs(pts[:, 2] - 0.5) < 1e-12, np.abs(pts[:, 1] - 0.5) < 1e-12):
+        assert np.mean(near[plane] < 0.02 * d) > 0.5
