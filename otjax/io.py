@@ -111,7 +111,12 @@ def read_points(
                 raise ValueError(f"{path}: invert and threshold apply to images only, not to {ext} files")
             return _read_text(path)
         if ext in IMAGE_EXTENSIONS:
-            return image_to_points(read_image(path), invert=invert, threshold=threshold)
+            try:
+                return image_to_points(read_image(path), invert=invert, threshold=threshold)
+            except ValueError as err:
+                if str(path) in str(err):
+                    raise
+                raise ValueError(f"{path}: {err}") from None
     except OSError as err:
         raise ValueError(f"cannot read {path}: {err.strerror or err}") from None
     raise ValueError(
@@ -174,9 +179,18 @@ def read_image(path) -> np.ndarray:
         raise ValueError(f"{path}: not a readable image") from None
     except Image.DecompressionBombError as err:  # Pillow's guard against huge images
         raise ValueError(f"{path}: {err}") from None
-    except SyntaxError as err:  # Pillow reports some corrupt headers this way
+    except OSError as err:
+        if err.errno is not None:  # the file system's error (missing file, a directory, ...)
+            raise
         raise ValueError(f"{path}: not a readable image ({err})") from None
-    return _grayscale(pixels)
+    except Exception as err:  # noqa: BLE001  any other decoder failure on a corrupt file
+        # Pillow's decoders report corrupt data as SyntaxError, ValueError, EOFError,
+        # struct.error, zlib.error, IndexError, ...: to the caller it is one problem.
+        raise ValueError(f"{path}: not a readable image ({type(err).__name__}: {err})") from None
+    try:
+        return _grayscale(pixels)
+    except ValueError as err:
+        raise ValueError(f"{path}: {err}") from None
 
 
 def image_to_points(image, *, invert: bool = False, threshold: float = 0.0) -> tuple[np.ndarray, np.ndarray]:

@@ -97,7 +97,7 @@ def _check_masses(masses, n: int) -> np.ndarray:
     if bad.any():
         count, first = _first_rows(bad)
         raise ValueError(f"masses must be >= 0: {count} negative, first at index {first}")
-    if not mass.sum() > 0:
+    if not mass.max() > 0:  # the max, not the sum: a sum of huge masses overflows (the frame says so)
         raise ValueError("masses are all zero: the total mass must be positive")
     return mass
 
@@ -209,9 +209,9 @@ def check_nonnegative(name: str, value) -> float:
       1.0
     """
     if isinstance(value, bool) or not isinstance(value, numbers.Real):
-        raise ValueError(f"{name} must be a number, got {value!r}")  # noqa: TRY004
-    value = float(value)
-    if not np.isfinite(value) or value < 0:
+        raise ValueError(f"{name} must be a number, got {_show(value)}")  # noqa: TRY004
+    value = _as_float(name, value)
+    if value < 0:
         raise ValueError(f"{name} must be a finite number >= 0, got {value}")
     return value
 
@@ -224,10 +224,8 @@ def check_count(name: str, value, minimum: int = 0) -> int:
       2
     """
     if isinstance(value, bool) or not isinstance(value, numbers.Integral):
-        raise ValueError(f"{name} must be an integer, got {value!r}")  # noqa: TRY004
-    if value < minimum:
-        raise ValueError(f"{name} must be >= {minimum}, got {value}")
-    return int(value)
+        raise ValueError(f"{name} must be an integer, got {_show(value)}")  # noqa: TRY004
+    return _as_int(name, value, minimum)
 
 
 def check_number(name: str, value, *, minimum: float = 0.0, integer: bool = False, allow_none: bool = False):
@@ -245,7 +243,37 @@ def check_number(name: str, value, *, minimum: float = 0.0, integer: bool = Fals
     kind = numbers.Integral if integer else numbers.Real
     if isinstance(value, bool) or not isinstance(value, kind):
         what = "an integer" if integer else "a number"
-        raise ValueError(f"{name} must be {what}, got {value!r}")  # noqa: TRY004
-    if not np.isfinite(value) or value < minimum:
+        raise ValueError(f"{name} must be {what}, got {_show(value)}")  # noqa: TRY004
+    if integer:
+        return _as_int(name, value, minimum)
+    value = _as_float(name, value)
+    if value < minimum:
         raise ValueError(f"{name} must be finite and >= {minimum}, got {value!r}")
-    return int(value) if integer else float(value)
+    return value
+
+
+def _show(value) -> str:
+    """``repr(value)``, cut short: a message stays one readable line whatever the value."""
+    text = repr(value)
+    return text if len(text) <= 60 else text[:40] + f"... ({len(text)} characters)"
+
+
+def _as_float(name: str, value) -> float:
+    """A finite Python float (a huge Python int does not fit one: an error, not an OverflowError)."""
+    try:
+        number = float(value)
+    except OverflowError:
+        number = float("inf")
+    if not np.isfinite(number):
+        raise ValueError(f"{name} must be a finite number, got {_show(value)}")
+    return number
+
+
+def _as_int(name: str, value, minimum) -> int:
+    """An integer ``>= minimum`` that fits int64, where every integer parameter ends up."""
+    value = int(value)
+    if value < minimum:
+        raise ValueError(f"{name} must be >= {minimum}, got {_show(value)}")
+    if value > np.iinfo(np.int64).max:
+        raise ValueError(f"{name} must be at most 2^63 - 1, got {_show(value)}")
+    return value

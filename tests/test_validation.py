@@ -5,7 +5,7 @@ import pytest
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
-from otjax.validation import check_count, check_nonnegative, check_points, check_target
+from otjax.validation import check_count, check_nonnegative, check_number, check_points, check_target
 
 
 def assert_rejected(check, args, words):
@@ -200,3 +200,32 @@ def test_check_nonnegative_and_count_accept():
         check_count("k", 0, minimum=1)
     with pytest.raises(ValueError, match="integer"):
         check_count("k", 1.0)
+
+
+@pytest.mark.parametrize(
+    ("check", "value", "words"),
+    [
+        (lambda v: check_number("tolerance", v), 10**400, ["tolerance", "finite", "characters"]),
+        (lambda v: check_number("tolerance", v), float("inf"), ["tolerance", "finite"]),
+        (lambda v: check_number("choices", v, minimum=1, integer=True), 2**63, ["choices", "2^63 - 1"]),
+        (lambda v: check_number("choices", v, minimum=1, integer=True), -(10**30), ["choices", ">= 1"]),
+        (lambda v: check_nonnegative("relevance", v), -(10**400), ["relevance", "finite"]),
+        (lambda v: check_count("relocation", v), 10**19, ["relocation", "2^63 - 1"]),
+    ],
+)
+def test_numbers_python_cannot_hold_in_float64_or_int64_are_value_errors(check, value, words):
+    with pytest.raises(ValueError) as info:
+        check(value)
+    message = str(info.value)
+    assert all(w in message for w in words) and len(message) < 200
+
+
+def test_the_largest_integers_and_floats_pass():
+    assert check_number("seed", 2**63 - 1, integer=True) == 2**63 - 1
+    assert check_number("tolerance", 1.7976931348623157e308) == 1.7976931348623157e308
+
+
+def test_masses_whose_sum_overflows_pass_validation_without_a_warning():
+    # Validation compares the largest mass with zero; the canonical frame refuses the total.
+    _, m = check_points(TRIANGLE, [1.7e308, 1.7e308, 1.0])
+    assert np.isfinite(m).all()
