@@ -1,9 +1,11 @@
 """Reading point sets (text files, grayscale images) and writing files atomically.
 
 Text formats (``.xy``, ``.xyz``, ``.xym``, ``.csv``, ``.txt``): one point per
-line, the numbers separated by whitespace or commas; ``#`` starts a comment;
-blank lines are skipped; a ``.csv`` may start with one non-numeric header
-line. Two columns are ``x y``; three are ``x y mass`` (in this 2D library
+line, the numbers separated by whitespace or commas (a comma may end a row,
+but one that starts a row or follows another marks a missing value, an
+error); ``#`` starts a comment; blank lines and a byte order mark are
+skipped; a ``.csv`` may start with one non-numeric header line. Two columns
+are ``x y``; three are ``x y mass`` (in this 2D library
 ``.xyz`` means ``x y mass``, not 3D coordinates; ``.xym`` is the weighted
 point format of CGAL's curve reconstruction demo, ``x y mass`` per line).
 Every data row has the same number of columns.
@@ -32,6 +34,9 @@ IMAGE_EXTENSIONS = (".png", ".jpg", ".jpeg", ".pgm", ".bmp", ".tif", ".tiff")
 # Rec. 601 luma weights, the ones Pillow uses for its "L" conversion.
 _LUMA = np.array([0.299, 0.587, 0.114])
 _SEPARATOR = re.compile(r"[,\s]+")
+# A comma that starts a line or follows another: a missing value, not a separator to merge
+# (merged, "x,,mass" would silently read as "x mass"). A trailing comma is tolerated.
+_EMPTY_FIELD = re.compile(r"^,|,\s*,")
 
 
 def _parse_row(fields: list[str]) -> list[float] | None:
@@ -44,7 +49,7 @@ def _parse_row(fields: list[str]) -> list[float] | None:
 
 def _read_text(path: Path) -> tuple[np.ndarray, np.ndarray | None]:
     try:
-        text = path.read_text(encoding="utf-8")
+        text = path.read_text(encoding="utf-8-sig")  # a byte order mark (Windows tools) is not data
     except UnicodeDecodeError:
         raise ValueError(f"{path}: not a UTF-8 text file") from None
     rows: list[list[float]] = []
@@ -54,6 +59,8 @@ def _read_text(path: Path) -> tuple[np.ndarray, np.ndarray | None]:
         line = line.split("#", 1)[0].strip()
         if not line:
             continue
+        if _EMPTY_FIELD.search(line):
+            raise ValueError(f"{path}:{number}: empty field (a comma with no number before it): {line[:80]!r}")
         fields = _SEPARATOR.split(line.strip(", \t"))
         values = _parse_row(fields)
         if values is None:

@@ -46,6 +46,14 @@ def test_csv_with_header_comments_and_blank_lines(tmp_path):
     np.testing.assert_array_equal(masses, [3, 6, 0])
 
 
+def test_byte_order_mark_and_trailing_commas_are_read(tmp_path):
+    path = tmp_path / "p.csv"
+    path.write_bytes("\ufeffx,y\r\n1,2,\r\n3,4,\r\n5,6\r\n".encode())
+    pts, masses = read_points(path)
+    np.testing.assert_array_equal(pts, [[1, 2], [3, 4], [5, 6]])
+    assert masses is None
+
+
 def test_whitespace_separated_with_tabs(tmp_path):
     path = tmp_path / "p.xy"
     path.write_text("0\t0\n  1   0 \n0 1\n")
@@ -68,6 +76,9 @@ def test_whitespace_separated_with_tabs(tmp_path):
         ("p.xy", "# only a comment\n\n", ["no points"]),
         ("p.xy", "", ["no points"]),
         ("p.dat", "0 0\n", ["unknown input extension", ".dat"]),
+        ("p.csv", "0,0,1\n1,,2\n", ["p.csv:2", "empty field"]),  # not read as the two numbers 1 2
+        ("p.csv", "0,0\n, 1, 2\n", ["p.csv:2", "empty field"]),
+        ("p.xy", "0 0\n1 , , 2\n", ["p.xy:2", "empty field"]),
     ],
 )
 def test_malformed_text_reports_file_and_line(tmp_path, name, text, words):
