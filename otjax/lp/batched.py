@@ -9,14 +9,17 @@ so row sums are exact by construction, and minimising the convex
 ``Phi(g) = eps sum_i m_i logsumexp_j((g_j - C_ij) / eps)`` under one linear
 constraint per facet, ``sum_{j in s} c_j g_j = 0``, makes each facet's column
 sums proportional to its capacities (the constraint's multiplier is ``l_s``).
-Each step solves the KKT system of that constraint (a dense SPD solve), backtracks to an Armijo step, and lowers ``eps`` while the
-member's certified gap is above tolerance. Every step also rounds the plan
-to an exactly feasible one (an upper bound) and evaluates the dual (a lower
-bound); the best of each is kept.
 
-The step budget is fixed: under ``vmap`` a data-dependent loop would run
-every member as long as the slowest. Why Newton rather than Sinkhorn, and
-the constants: ``docs/decisions.md#lp_solver``.
+A step: bounds at ``g`` (the plan rounded to an exactly feasible one, an
+upper bound; the dual value of ``g``, a lower bound; the best of each is
+kept); a Sinkhorn step (the closed-form KL projection of each facet's
+columns, which moves bins no point reaches yet); ``eps`` lowered if ``g``
+solved the current one; a Newton step on the KKT system of the facet
+constraints with Armijo backtracking. A member is done when its certified
+gap is within tolerance; the loop stops when every member is done or the
+step budget is spent (a fixed budget: under ``vmap`` an open-ended loop
+would run as long as its slowest member). Why this solver and its
+constants: ``docs/decisions.md#lp_solver``.
 """
 
 from __future__ import annotations
@@ -36,18 +39,18 @@ class NewtonOptions(NamedTuple):
     """Static settings of :func:`solve_batched` (``docs/decisions.md#lp_solver``).
 
     Attributes:
-      steps: Newton steps per member (a fixed budget).
+      steps: at most this many steps per member (a fixed budget).
       rtol: a member converges when ``cost - lower_bound <= rtol * cost + atol``.
       atol: absolute gap tolerance, in cost units times mass.
       eps_start: first ``eps``, relative to the member's cost spread (the
         mass-weighted mean over points of ``mean_j C_ij - min_j C_ij``).
-      decay: factor on ``eps`` after each step while the gap is above ``rtol``.
+      decay: factor on ``eps`` once the current one is solved.
+      uniformity: ``eps`` counts as solved once every facet bin's column sum
+        is within this fraction of the member's mass of ``c_j l_s``.
       eps_floor: smallest ``eps``, relative to the cost spread.
-      backtracks: at most this many halvings of a step in the line search.
-      uniformity: ``eps`` is lowered once every facet bin's column sum is
-        within this fraction of the member's mass of ``c_j l_s``.
-      ridge: added curvature of a facet bin, relative to the curvature
+      ridge: curvature added to a facet bin, relative to the curvature
         ``c_j l_s / eps`` it has at its share.
+      backtracks: at most this many halvings of a step in the line search.
     """
 
     steps: int = 64
@@ -55,32 +58,73 @@ class NewtonOptions(NamedTuple):
     atol: float = 0.0
     eps_start: float = 0.3
     decay: float = 0.6
-    eps_floor: float = 1e-9
-    backtracks: int = 12
     uniformity: float = 1e-6
+    eps_floor: float = 1e-9
     ridge: float = 1e-3
+    backtracks: int = 12
+    predict: bool = True
 
 
 class _Member(NamedTuple):
     """One member's arrays inside the solver (no batch axis)."""
 
     cost: jax.Array  # (P, K); 0 on padding
-    mass: jax.Array  # (P,)
-    capacity: jax.Array  # (K,); 0 outside facet bins
+    mass: jax.Array  # (P,); 0 on padding
+    capacity: jax.Array  # (K,); c_j on facet bins, 0 elsewhere
     real: jax.Array  # (K,) bool: bins a point may use
     free: jax.Array  # (K,) bool: facet bins (their potential moves)
-    vertex: jax.Array  # (K,) bool: real vertex bins
-    onehot: jax.Array  # (K, S) float: facet bin j belongs to facet s
+    onehot: jax.Array  # (K, S): facet bin j belongs to facet s
+    sink: jax.Array  # (P, K): where a unit of point i's rounding deficit goes
+    sink_cost: jax.Array  # (P,): its cost
 
 
 class _State(NamedTuple):
-    g: jax.Array  # (K,) potentials; sum_{j in s} c_j g_j = 0
+    g: jax.Array  # (K,) potentials, sum_{j in s} c_j g_j = 0
     eps: jax.Array  # () current regularisation
+    eps_min: jax.Array  # () its floor
     best_ub: jax.Array  # () cost of the best rounded plan so far
     best_g: jax.Array  # (K,) the potentials it was rounded from
     best_eps: jax.Array  # () and their eps
     best_lb: jax.Array  # () best dual value so far
-    eps_min: jax.Array  # () floor of eps
+    done: jax.Array  # () bool: certified within tolerance
+    steps: jax.Array  # () int32: steps taken before done
+    g_prev: jax.Array  # (K,) g when the previous eps was solved
+    eps_prev: jax.Array  # () that eps (0: none yet)
+
+
+def _member(problem: TransportLP, dtype) -> _Member:
+    live = problem.bin_mask.any()
+    # A member without bins runs on a stand-in bin (it is flagged infeasible).
+    real = problem.bin_mask | ((~live) & (jnp.arange(problem.bin_mask.shape[0]) == 0))
+    free = real & ~problem.is_vertex
+    vertex = real & problem.is_vertex
+    n_s = problem.simplex_mask.shape[0]
+    onehot = ((problem.simplex[:, None] == jnp.arange(n_s)[None, :]) & free[:, None]).astype(dtype)
+    cost = jnp.where(real[None, :] & problem.point_mask[:, None], problem.cost, 0).astype(dtype)
+    capacity = jnp.where(free, problem.capacity, 0).astype(dtype)
+    # A deficit goes to the cheaper of the nearest vertex bin and the facet
+    # of least mean cost, spread by capacity (which keeps the facet uniform).
+    cap_of = capacity[:, None] * onehot
+    total = cap_of.sum(axis=0)
+    spread = cap_of / jnp.where(total > 0, total, 1)
+    facet_cost = jnp.where(total > 0, cost @ spread, jnp.inf)  # (P, S)
+    vertex_cost = jnp.where(vertex[None, :], cost, jnp.inf)  # (P, K)
+    to_vertex = jnp.min(vertex_cost, axis=1) <= jnp.min(facet_cost, axis=1)
+    vertex_pick = jax.nn.one_hot(jnp.argmin(vertex_cost, axis=1), cost.shape[1], dtype=dtype)
+    facet_pick = jax.nn.one_hot(jnp.argmin(facet_cost, axis=1), n_s, dtype=dtype) @ spread.T
+    sink = jnp.where(to_vertex[:, None], vertex_pick, facet_pick)
+    return _Member(cost=cost, mass=jnp.where(problem.point_mask, problem.mass, 0).astype(dtype),
+                   capacity=capacity, real=real, free=free, onehot=onehot, sink=sink,
+                   sink_cost=jnp.sum(sink * cost, axis=1))
+
+
+def _cost_spread(mb: _Member):
+    """Mass-weighted mean over points of ``mean_j C_ij - min_j C_ij`` (the scale of ``eps``)."""
+    mean = jnp.sum(jnp.where(mb.real[None, :], mb.cost, 0), axis=1) / jnp.maximum(mb.real.sum(), 1)
+    low = jnp.min(jnp.where(mb.real[None, :], mb.cost, jnp.inf), axis=1)
+    total = jnp.maximum(mb.mass.sum(), jnp.finfo(mb.mass.dtype).tiny)
+    spread = jnp.sum(mb.mass * (mean - low)) / total
+    return jnp.maximum(spread, jnp.finfo(mb.mass.dtype).eps * jnp.maximum(jnp.max(mean), 1e-30))
 
 
 def _logits(mb: _Member, g, eps):
@@ -92,108 +136,113 @@ def _objective(mb: _Member, g, eps):
     return eps * jnp.sum(mb.mass * jax.nn.logsumexp(_logits(mb, g, eps), axis=1))
 
 
-def _entropic_plan(mb: _Member, g, eps):
+class _Plan(NamedTuple):
+    plan: jax.Array  # (P, K) entropic plan, rows summing to m_i
+    logits: jax.Array  # (P, K)
+    log_norm: jax.Array  # (P,) logsumexp of each row's logits
+
+
+def _entropic_plan(mb: _Member, g, eps) -> _Plan:
     logits = _logits(mb, g, eps)
-    shifted = logits - jnp.max(logits, axis=1, keepdims=True)
+    top = jnp.max(logits, axis=1, keepdims=True)
+    shifted = logits - top
     # Weights below the cut are zeroed: products of two of them would be
     # subnormal, which the CPU handles ~100x slower (and they carry no mass).
     cut = 0.4 * np.log(jnp.finfo(logits.dtype).tiny)
     w = jnp.where(shifted > cut, jnp.exp(jnp.maximum(shifted, cut)), 0)
-    return mb.mass[:, None] * (w / jnp.sum(w, axis=1, keepdims=True))
+    norm = jnp.sum(w, axis=1, keepdims=True)
+    return _Plan(mb.mass[:, None] * (w / norm), logits, (top + jnp.log(norm))[:, 0])
 
 
-def _round(mb: _Member, plan):
-    """An exactly feasible plan from an approximate one (cost: an upper bound).
+def _facet_level(mb: _Member, received):
+    """``(K,)`` ``c_j * l_s(j)`` with ``l_s = sum r / sum c`` over the facet (0 off facets)."""
+    cap = mb.capacity @ mb.onehot
+    return mb.capacity * (mb.onehot @ ((received @ mb.onehot) / jnp.where(cap > 0, cap, 1)))
 
-    Rows are scaled down to at most ``m_i``; each facet's columns down to a
-    common ``l_s = min_k r_k / c_k``; each point's deficit then goes to its
-    cheapest sink: a vertex bin, or a whole facet spread by capacity (which
-    keeps the facet uniform, so a member without vertex bins stays feasible).
-    """
+
+def _scaled(mb: _Member, plan):
+    """``plan`` scaled down to rows ``<= m_i`` and uniform facets ``l_s = min_k r_k / c_k``."""
     rows = plan.sum(axis=1)
     plan = plan * jnp.where(rows > mb.mass, mb.mass / jnp.where(rows > 0, rows, 1), 1)[:, None]
     received = plan.sum(axis=0)
     ratio = jnp.where(mb.free, received / jnp.where(mb.free, mb.capacity, 1), jnp.inf)
     level = jnp.min(jnp.where(mb.onehot > 0, ratio[:, None], jnp.inf), axis=0)  # (S,)
-    level = jnp.where(jnp.isfinite(level), level, 0)
-    want = mb.capacity * (mb.onehot @ level)
-    plan = plan * jnp.where(mb.free, want / jnp.where(received > 0, received, 1), 1)[None, :]
-    deficit = jnp.maximum(mb.mass - plan.sum(axis=1), 0)
-    cap_of = mb.capacity[:, None] * mb.onehot  # (K, S)
-    spread = cap_of / jnp.where(cap_of.sum(axis=0) > 0, cap_of.sum(axis=0), 1)  # (K, S)
-    facet_cost = jnp.where(cap_of.sum(axis=0) > 0, mb.cost @ spread, jnp.inf)  # (P, S)
-    vertex_cost = jnp.where(mb.vertex[None, :], mb.cost, jnp.inf)  # (P, K)
-    to_vertex = jnp.min(vertex_cost, axis=1) <= jnp.min(facet_cost, axis=1)
-    vertex_pick = jax.nn.one_hot(jnp.argmin(vertex_cost, axis=1), plan.shape[1], dtype=plan.dtype)
-    facet_pick = jax.nn.one_hot(jnp.argmin(facet_cost, axis=1), spread.shape[1], dtype=plan.dtype) @ spread.T
-    extra = jnp.where(to_vertex[:, None], vertex_pick, facet_pick)
-    return plan + deficit[:, None] * extra
+    want = mb.capacity * (mb.onehot @ jnp.where(jnp.isfinite(level), level, 0))
+    return plan * jnp.where(mb.free, want / jnp.where(received > 0, received, 1), 1)[None, :]
+
+
+def _round(mb: _Member, plan):
+    """An exactly feasible plan from an approximate one: :func:`_scaled`, then
+    each point's deficit to its sink. Works without vertex bins."""
+    plan = _scaled(mb, plan)
+    return plan + jnp.maximum(mb.mass - plan.sum(axis=1), 0)[:, None] * mb.sink
+
+
+def _rounded_cost(mb: _Member, plan):
+    """The cost of :func:`_round` without building it: an upper bound on the optimum."""
+    plan = _scaled(mb, plan)
+    return jnp.sum(plan * mb.cost) + jnp.sum(jnp.maximum(mb.mass - plan.sum(axis=1), 0) * mb.sink_cost)
 
 
 def _lower_bound(mb: _Member, g):
     """A feasible LP dual value: ``g`` shifted per facet to ``sum c g = 0``, then its c-transform."""
     cap_of = mb.capacity[:, None] * mb.onehot
     total = jnp.where(cap_of.sum(axis=0) > 0, cap_of.sum(axis=0), 1)
-    shift = mb.onehot @ ((g @ cap_of) / total)
-    gf = jnp.where(mb.free, g - shift, 0)
+    gf = jnp.where(mb.free, g - mb.onehot @ ((g @ cap_of) / total), 0)
     reduced = jnp.where(mb.real[None, :], mb.cost - gf[None, :], jnp.inf)
     return jnp.sum(mb.mass * jnp.min(reduced, axis=1))
 
 
-def _facet_level(mb: _Member, received):
-    """``(K,)`` ``c_j * l_s(j)`` with ``l_s`` the facet's mean fill ``sum r / sum c`` (0 off facets)."""
-    cap = mb.capacity @ mb.onehot
-    level = (received @ mb.onehot) / jnp.where(cap > 0, cap, 1)
-    return mb.capacity * (mb.onehot @ level)
-
-
-def _uniformize(mb: _Member, g, eps):
+def _uniformize(mb: _Member, g, eps, ep: _Plan):
     """The KL projection of each facet's column sums onto ``{c_j l}`` (a Sinkhorn step).
 
     ``log l`` is the c-weighted mean of ``log(r_j / c_j)``, so ``sum c_j g_j``
-    is unchanged; computed in the log domain so that bins no point reaches
-    still move.
+    is unchanged. A bin whose mass fell under the plan's cut uses its largest
+    term instead (a lower bound of ``log r_j``), so it still moves.
     """
-    logits = _logits(mb, g, eps)
-    log_rows = jnp.log(jnp.where(mb.mass > 0, mb.mass, 1)) - jax.nn.logsumexp(logits, axis=1)
-    log_r = jax.nn.logsumexp(jnp.where(mb.mass[:, None] > 0, logits + log_rows[:, None], -jnp.inf), axis=0)
+    received = ep.plan.sum(axis=0)
+    log_m = jnp.log(jnp.where(mb.mass > 0, mb.mass, 1))
+    terms = jnp.where(mb.mass[:, None] > 0, ep.logits - ep.log_norm[:, None] + log_m[:, None], -jnp.inf)
+    tiny = jnp.finfo(received.dtype).tiny
+    log_r = jnp.where(received > tiny, jnp.log(jnp.maximum(received, tiny)), jnp.max(terms, axis=0))
     log_rc = jnp.where(mb.free, log_r - jnp.log(jnp.where(mb.free, mb.capacity, 1)), 0)
     cap = mb.capacity @ mb.onehot
     log_l = ((mb.capacity * log_rc) @ mb.onehot) / jnp.where(cap > 0, cap, 1)
-    step = (mb.onehot @ log_l) - log_rc
+    step = mb.onehot @ log_l - log_rc
     return jnp.where(mb.free & jnp.isfinite(step), g + eps * step, g)
 
 
-def _newton_direction(mb: _Member, g, eps, ridge: float):
-    """``(direction, gradient)``: the KKT step of ``Phi`` keeping ``sum_{j in s} c_j g_j`` fixed."""
-    plan = _entropic_plan(mb, g, eps)
-    received = plan.sum(axis=0)
+def _newton_direction(mb: _Member, eps, ep: _Plan, ridge: float):
+    """``(direction, gradient)``: the KKT step of ``Phi`` keeping each ``sum_{j in s} c_j g_j``."""
+    received = ep.plan.sum(axis=0)
     grad = jnp.where(mb.free, received, 0)
-    pi = jnp.where(mb.mass[:, None] > 0, plan / jnp.where(mb.mass > 0, mb.mass, 1)[:, None], 0)
-    hess = (jnp.diag(received) - pi.T @ plan) / eps
+    pi = ep.plan / jnp.where(mb.mass > 0, mb.mass, 1)[:, None]
+    hess = (jnp.diag(received) - pi.T @ ep.plan) / eps
     both = mb.free[:, None] & mb.free[None, :]
     # A bin no point reaches has a zero row: a ridge of the curvature it has
-    # once it holds its share keeps the system definite and its step ~eps/ridge.
-    floor = ridge * _facet_level(mb, received) / eps + jnp.finfo(hess.dtype).tiny / eps
+    # at its share keeps the system definite and its step near eps / ridge.
+    floor = (ridge * _facet_level(mb, received) + jnp.finfo(hess.dtype).tiny) / eps
     hess = jnp.where(both, hess, 0) + jnp.diag(jnp.where(mb.free, floor, 1))
     a = (mb.capacity[:, None] * mb.onehot).T  # (S, K)
     solved = spd_solve(hess, jnp.concatenate([grad[:, None], a.T], axis=1))
-    h_grad, h_a = solved[:, 0], solved[:, 1:]  # H^-1 grad, H^-1 A^T (K, S)
+    h_grad, h_a = solved[:, 0], solved[:, 1:]  # H^-1 grad, H^-1 A^T
     schur = a @ h_a
-    unused = jnp.diagonal(schur) <= 0
-    schur = schur + jnp.diag(jnp.where(unused, 1, 0))
-    nu = jnp.linalg.solve(schur, -(a @ h_grad))
-    direction = -(h_grad + h_a @ nu)
-    return jnp.where(mb.free, direction, 0), grad
+    schur = schur + jnp.diag(jnp.where(jnp.diagonal(schur) > 0, 0, 1))  # ids without facet bins
+    nu = spd_solve(schur, -(a @ h_grad)[:, None])[:, 0]
+    return jnp.where(mb.free, -(h_grad + h_a @ nu), 0), grad
 
 
-def _line_search(mb: _Member, g, eps, direction, grad, backtracks: int):
-    """Largest ``t`` in ``1, 1/2, ...`` with ``Phi(g + t d) <= Phi(g) + t/4 grad.d``; 0 if none."""
-    phi0 = _objective(mb, g, eps)
+def _line_search(mb: _Member, g, eps, phi0, direction, grad, backtracks: int):
+    """Largest ``t`` in ``1, 1/2, ...`` with ``Phi(g + t d) <= Phi(g) + t/4 grad.d``; 0 if none.
+
+    The test allows ``Phi``'s rounding error: near the optimum the decrease
+    falls below it, and a strict test would stop the quadratic convergence.
+    """
     slope = jnp.dot(grad, direction)
+    phi0 = phi0 + 16 * jnp.finfo(phi0.dtype).eps * jnp.abs(phi0)
 
     def not_done(carry):
-        t, ok, k = carry
+        _, ok, k = carry
         return (~ok) & (k < backtracks)
 
     def halve(carry):
@@ -206,78 +255,59 @@ def _line_search(mb: _Member, g, eps, direction, grad, backtracks: int):
     return jnp.where(ok & (slope < 0), t, 0)
 
 
-def _member(problem: TransportLP, dtype) -> _Member:
-    live = problem.bin_mask.any()
-    # A member without bins runs on a stand-in bin (it is flagged infeasible).
-    real = problem.bin_mask | ((~live) & (jnp.arange(problem.bin_mask.shape[0]) == 0))
-    free = real & ~problem.is_vertex
-    n_s = problem.simplex_mask.shape[0]
-    onehot = ((problem.simplex[:, None] == jnp.arange(n_s)[None, :]) & free[:, None]).astype(dtype)
-    return _Member(cost=jnp.where(real[None, :] & problem.point_mask[:, None], problem.cost, 0).astype(dtype),
-                   mass=jnp.where(problem.point_mask, problem.mass, 0).astype(dtype),
-                   capacity=jnp.where(free, problem.capacity, 0).astype(dtype), real=real, free=free,
-                   vertex=real & problem.is_vertex, onehot=onehot)
-
-
-def _cost_spread(mb: _Member):
-    """Mass-weighted mean over points of ``mean_j C_ij - min_j C_ij`` (the scale of ``eps``)."""
-    n_real = jnp.maximum(mb.real.sum(), 1)
-    mean = jnp.sum(jnp.where(mb.real[None, :], mb.cost, 0), axis=1) / n_real
-    low = jnp.min(jnp.where(mb.real[None, :], mb.cost, jnp.inf), axis=1)
-    total = jnp.maximum(mb.mass.sum(), jnp.finfo(mb.mass.dtype).tiny)
-    spread = jnp.sum(mb.mass * (mean - low)) / total
-    return jnp.maximum(spread, jnp.finfo(mb.mass.dtype).eps * jnp.maximum(jnp.max(mean), 1e-30))
-
-
 def _init_state(mb: _Member, options: NewtonOptions) -> _State:
     zeros = jnp.zeros_like(mb.capacity)
     spread = _cost_spread(mb)
     eps0 = options.eps_start * spread
     inf = jnp.asarray(jnp.inf, mb.cost.dtype)
-    return _State(zeros, eps0, inf, zeros, eps0, -inf, options.eps_floor * spread)
+    return _State(zeros, eps0, options.eps_floor * spread, inf, zeros, eps0, -inf, jnp.asarray(False),
+                  jnp.asarray(0, jnp.int32), zeros, jnp.zeros_like(eps0))
 
 
 def _step(mb: _Member, st: _State, options: NewtonOptions) -> _State:
-    """Bounds at ``g``, then ``eps`` lowered if ``g`` solves it, a Sinkhorn step and a Newton step."""
-    plan = _entropic_plan(mb, st.g, st.eps)
-    ub = jnp.sum(_round(mb, plan) * mb.cost)
+    """One step (see the module docstring); a member already done keeps its state."""
+    ep = _entropic_plan(mb, st.g, st.eps)
+    ub = _rounded_cost(mb, ep.plan)
     lb = _lower_bound(mb, st.g)
     better = ub < st.best_ub
     best_ub = jnp.where(better, ub, st.best_ub)
     best_lb = jnp.maximum(st.best_lb, jnp.where(jnp.isfinite(lb), lb, -jnp.inf))
     done = best_ub - best_lb <= options.rtol * best_ub + options.atol
-    received = plan.sum(axis=0)
+    received = ep.plan.sum(axis=0)
     off = jnp.max(jnp.where(mb.free, jnp.abs(received - _facet_level(mb, received)), 0))
     solved = off <= options.uniformity * jnp.sum(mb.mass)
-    eps = jnp.where(done | ~solved, st.eps, jnp.maximum(st.eps * options.decay, st.eps_min))
-    g = _uniformize(mb, st.g, eps)
-    direction, grad = _newton_direction(mb, g, eps, options.ridge)
-    t = _line_search(mb, g, eps, direction, grad, options.backtracks)
+    g = _uniformize(mb, st.g, st.eps, ep)
+    lower = solved & ~done
+    eps = jnp.where(lower, jnp.maximum(st.eps * options.decay, st.eps_min), st.eps)
+    # Continuation: extrapolate g linearly in eps from the last two solved levels.
+    known = st.eps_prev > st.eps
+    slope = jnp.where(known, (g - st.g_prev) / jnp.where(known, st.eps_prev - st.eps, 1), 0)
+    g_prev, eps_prev = jnp.where(lower, g, st.g_prev), jnp.where(lower, st.eps, st.eps_prev)
+    if options.predict:
+        g = jnp.where(lower, g + (st.eps - eps) * slope, g)
+    ep = _entropic_plan(mb, g, eps)
+    direction, grad = _newton_direction(mb, eps, ep, options.ridge)
+    phi0 = eps * jnp.sum(mb.mass * ep.log_norm)
+    t = _line_search(mb, g, eps, phi0, direction, grad, options.backtracks)
     g = jnp.where(jnp.all(jnp.isfinite(direction)), g + t * direction, g)
-    return _State(g, eps, best_ub, jnp.where(better, st.g, st.best_g), jnp.where(better, st.eps, st.best_eps),
-                  best_lb, st.eps_min)
+    new = _State(g, eps, st.eps_min, best_ub, jnp.where(better, st.g, st.best_g),
+                 jnp.where(better, st.eps, st.best_eps), best_lb, done, st.steps + (~done).astype(jnp.int32),
+                 g_prev, eps_prev)
+    return jax.tree.map(lambda old, upd: jnp.where(st.done, old, upd), st, new)
 
 
-def _solve_one(problem: TransportLP, options: NewtonOptions, dtype) -> LPSolution:
-    mb = _member(problem, dtype)
-    st = jax.lax.fori_loop(0, options.steps, lambda _, st: _step(mb, st, options), _init_state(mb, options))
-    # The last step's point has not been rounded yet.
-    last = _round(mb, _entropic_plan(mb, st.g, st.eps))
-    last_ub = jnp.sum(last * mb.cost)
-    plan = jnp.where(last_ub <= st.best_ub, last, _round(mb, _entropic_plan(mb, st.best_g, st.best_eps)))
-    lb = jnp.maximum(st.best_lb, _lower_bound(mb, st.g))
-    return _summary(mb, problem, plan, lb, options)
-
-
-def _summary(mb: _Member, problem: TransportLP, plan, lb, options: NewtonOptions) -> LPSolution:
-    live = problem.bin_mask.any()
-    infeasible = (~live) & jnp.any(mb.mass > 0)
+def _finish(mb: _Member, problem: TransportLP, st: _State, options: NewtonOptions) -> LPSolution:
+    """The best rounded plan (the last step's point included), its totals and status."""
+    last = _entropic_plan(mb, st.g, st.eps).plan
+    use_last = _rounded_cost(mb, last) <= st.best_ub
+    g, eps = jnp.where(use_last, st.g, st.best_g), jnp.where(use_last, st.eps, st.best_eps)
+    plan = _round(mb, _entropic_plan(mb, g, eps).plan)
     plan = jnp.where(problem.bin_mask[None, :] & problem.point_mask[:, None], plan, 0)
+    lb = jnp.maximum(st.best_lb, _lower_bound(mb, st.g))
     cost = jnp.sum(plan * mb.cost)
     received = plan.sum(axis=0)
     n_s = problem.simplex_mask.shape[0]
-    all_of = (problem.simplex[:, None] == jnp.arange(n_s)[None, :]) & problem.bin_mask[:, None]
-    simplex_mass = received @ all_of.astype(plan.dtype)
+    of_simplex = (problem.simplex[:, None] == jnp.arange(n_s)[None, :]) & problem.bin_mask[:, None]
     cap = mb.capacity @ mb.onehot
     density = jnp.where(cap > 0, (received @ mb.onehot) / jnp.where(cap > 0, cap, 1), 0)
     total = jnp.maximum(mb.mass.sum(), jnp.finfo(plan.dtype).tiny)
@@ -286,15 +316,25 @@ def _summary(mb: _Member, problem: TransportLP, plan, lb, options: NewtonOptions
     violation = jnp.maximum(row_err, col_err) / total
     lb = jnp.minimum(lb, cost)
     ok = (cost - lb <= options.rtol * cost + options.atol) & (violation <= options.rtol)
+    infeasible = (~problem.bin_mask.any()) & jnp.any(mb.mass > 0)
     finite = jnp.isfinite(cost) & jnp.all(jnp.isfinite(plan))
     status = jnp.where(infeasible, INFEASIBLE, jnp.where(~finite, FAILED, jnp.where(ok, CONVERGED, ITERATION_LIMIT)))
-    return LPSolution(plan=plan, simplex_mass=simplex_mass, density=density, cost=cost, lower_bound=lb,
-                      violation=violation, status=status.astype(jnp.int8))
+    return LPSolution(plan=plan, simplex_mass=received @ of_simplex.astype(plan.dtype), density=density, cost=cost,
+                      lower_bound=lb, violation=violation, status=status.astype(jnp.int8), iterations=st.steps)
 
 
 @functools.partial(jax.jit, static_argnames=("options", "dtype"))
 def _solve_jit(problem: TransportLP, options: NewtonOptions, dtype) -> LPSolution:
-    return jax.vmap(lambda member: _solve_one(member, options, dtype))(problem)
+    members = jax.vmap(lambda p: _member(p, dtype))(problem)
+    state = jax.vmap(lambda mb: _init_state(mb, options))(members)
+    step = jax.vmap(lambda mb, st: _step(mb, st, options))
+
+    def more(carry):
+        k, st = carry
+        return (k < options.steps) & ~jnp.all(st.done)
+
+    _, state = jax.lax.while_loop(more, lambda c: (c[0] + 1, step(members, c[1])), (0, state))
+    return jax.vmap(lambda mb, p, st: _finish(mb, p, st, options))(members, problem, state)
 
 
 def require_float64(dtype) -> None:
@@ -308,7 +348,7 @@ def require_float64(dtype) -> None:
 
 
 def solve_batched(problem: TransportLP, options: NewtonOptions = NewtonOptions(), dtype=np.float64) -> LPSolution:
-    """Solves every member of a padded batch with a fixed Newton budget (JAX arrays out).
+    """Solves every member of a padded batch within a fixed step budget (JAX arrays out).
 
     Args:
       problem: the padded batch (NumPy or JAX arrays).

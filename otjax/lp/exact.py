@@ -31,6 +31,7 @@ class MemberSolution(NamedTuple):
       simplex_mass: ``(S,)`` float. Mass each simplex id receives.
       cost: float. ``sum_ij x_ij C_ij``.
       status: int. A status code of :mod:`otjax.lp.problem`.
+      iterations: int. HiGHS's iterations.
     """
 
     plan: np.ndarray
@@ -38,6 +39,7 @@ class MemberSolution(NamedTuple):
     simplex_mass: np.ndarray
     cost: float
     status: int
+    iterations: int = 0
 
 
 def constraints(lp: LocalLP) -> tuple[scipy.sparse.csr_matrix, np.ndarray]:
@@ -103,10 +105,10 @@ def solve_member(lp: LocalLP, time_limit: float | None = None) -> MemberSolution
     res = scipy.optimize.linprog(c, A_eq=a_eq, b_eq=b_eq, bounds=(0, None), method="highs", options=options)
     status = _HIGHS_STATUS.get(res.status, FAILED)
     if status != CONVERGED or res.x is None:
-        return MemberSolution(np.zeros((p, k)), np.zeros(s), np.zeros(s), 0.0, status)
+        return MemberSolution(np.zeros((p, k)), np.zeros(s), np.zeros(s), 0.0, status, int(res.nit))
     plan = np.maximum(res.x[: p * k].reshape(p, k), 0.0)
     mass, density = simplex_totals(plan, lp, s)
-    return MemberSolution(plan, density, mass, float(np.sum(plan * lp.cost)), CONVERGED)
+    return MemberSolution(plan, density, mass, float(np.sum(plan * lp.cost)), CONVERGED, int(res.nit))
 
 
 def marginal_violation(plan: np.ndarray, lp: LocalLP) -> float:
@@ -142,7 +144,7 @@ def solve_exact(batch: TransportLP, members: Sequence[int] | None = None,
     if into is None:
         out = LPSolution(np.zeros((b, p_cap, k_cap), dtype), np.zeros((b, s_cap), dtype),
                          np.zeros((b, s_cap), dtype), np.zeros(b, dtype), np.zeros(b, dtype),
-                         np.zeros(b, dtype), np.zeros(b, np.int8))
+                         np.zeros(b, dtype), np.zeros(b, np.int8), np.zeros(b, np.int32))
     else:
         out = LPSolution(*(np.array(a) for a in into))
     for m in range(b) if members is None else members:
@@ -162,4 +164,5 @@ def solve_exact(batch: TransportLP, members: Sequence[int] | None = None,
         out.lower_bound[m] = sol.cost if sol.status == CONVERGED else -np.inf
         out.violation[m] = marginal_violation(sol.plan, lp) if sol.status == CONVERGED else np.inf
         out.status[m] = sol.status
+        out.iterations[m] = sol.iterations
     return out

@@ -110,6 +110,8 @@ class LPSolution(NamedTuple):
         to the member's total mass (row sums and facet uniformity).
       status: ``(B,)`` int8. :data:`CONVERGED`, :data:`ITERATION_LIMIT`,
         :data:`INFEASIBLE` or :data:`FAILED`.
+      iterations: ``(B,)`` int32. Steps the solver took (the batched solver's
+        steps before convergence; HiGHS's simplex iterations).
     """
 
     plan: np.ndarray
@@ -119,6 +121,7 @@ class LPSolution(NamedTuple):
     lower_bound: np.ndarray
     violation: np.ndarray
     status: np.ndarray
+    iterations: np.ndarray
 
     @property
     def gap(self):
