@@ -14,7 +14,7 @@ A step: bounds at ``g`` (the plan rounded to an exactly feasible one, an
 upper bound; the dual value of ``g``, a lower bound; the best of each is
 kept); a Sinkhorn step (the closed-form KL projection of each facet's
 columns, which moves bins no point reaches yet); ``eps`` lowered if ``g``
-solved the current one; a Newton step on the KKT system of the facet
+solved the current one; a Newton step in the null space of the facet
 constraints with Armijo backtracking. A member is done when its certified
 gap is within tolerance; the loop stops when every member is done or the
 step budget is spent (a fixed budget: under ``vmap`` an open-ended loop
@@ -53,14 +53,14 @@ class NewtonOptions(NamedTuple):
       backtracks: at most this many halvings of a step in the line search.
     """
 
-    steps: int = 64
+    steps: int = 48
     rtol: float = 1e-3
     atol: float = 0.0
-    eps_start: float = 0.3
-    decay: float = 0.6
+    eps_start: float = 0.1
+    decay: float = 0.3
     uniformity: float = 1e-6
     eps_floor: float = 1e-9
-    ridge: float = 1e-3
+    ridge: float = 1e-6
     backtracks: int = 12
     predict: bool = True
 
@@ -213,7 +213,13 @@ def _uniformize(mb: _Member, g, eps, ep: _Plan):
 
 
 def _newton_direction(mb: _Member, eps, ep: _Plan, ridge: float):
-    """``(direction, gradient)``: the KKT step of ``Phi`` keeping each ``sum_{j in s} c_j g_j``."""
+    """``(direction, gradient)``: the Newton step of ``Phi`` in the null space of the facet constraints.
+
+    With ``W`` the facets' normalised capacity vectors (orthonormal: facets
+    share no bin) and ``P = I - W W^T``, it solves
+    ``(P H P + h W W^T) d = -P grad``: the ``W`` part of ``d`` vanishes, so
+    ``sum_{j in s} c_j d_j = 0``, and one SPD solve replaces the KKT system.
+    """
     received = ep.plan.sum(axis=0)
     grad = jnp.where(mb.free, received, 0)
     pi = ep.plan / jnp.where(mb.mass > 0, mb.mass, 1)[:, None]
@@ -223,13 +229,15 @@ def _newton_direction(mb: _Member, eps, ep: _Plan, ridge: float):
     # at its share keeps the system definite and its step near eps / ridge.
     floor = (ridge * _facet_level(mb, received) + jnp.finfo(hess.dtype).tiny) / eps
     hess = jnp.where(both, hess, 0) + jnp.diag(jnp.where(mb.free, floor, 1))
-    a = (mb.capacity[:, None] * mb.onehot).T  # (S, K)
-    solved = spd_solve(hess, jnp.concatenate([grad[:, None], a.T], axis=1))
-    h_grad, h_a = solved[:, 0], solved[:, 1:]  # H^-1 grad, H^-1 A^T
-    schur = a @ h_a
-    schur = schur + jnp.diag(jnp.where(jnp.diagonal(schur) > 0, 0, 1))  # ids without facet bins
-    nu = spd_solve(schur, -(a @ h_grad)[:, None])[:, 0]
-    return jnp.where(mb.free, -(h_grad + h_a @ nu), 0), grad
+    w = mb.capacity[:, None] * mb.onehot
+    w = w / jnp.sqrt(jnp.maximum(jnp.sum(w * w, axis=0), jnp.finfo(w.dtype).tiny))  # (K, S)
+    ph = hess - w @ (w.T @ hess)
+    php = ph - (ph @ w) @ w.T
+    scale = jnp.max(jnp.diagonal(hess))
+    system = php + scale * (w @ w.T)
+    projected = grad - w @ (w.T @ grad)
+    direction = spd_solve(system, -projected[:, None])[:, 0]
+    return jnp.where(mb.free, direction, 0), grad
 
 
 def _line_search(mb: _Member, g, eps, phi0, direction, grad, backtracks: int):
@@ -324,14 +332,14 @@ def _finish(mb: _Member, problem: TransportLP, st: _State, options: NewtonOption
 
 
 @functools.partial(jax.jit, static_argnames=("options", "dtype"))
-def _solve_jit(problem: TransportLP, options: NewtonOptions, dtype) -> LPSolution:
+def _solve_jit(problem: TransportLP, steps, options: NewtonOptions, dtype) -> LPSolution:
     members = jax.vmap(lambda p: _member(p, dtype))(problem)
     state = jax.vmap(lambda mb: _init_state(mb, options))(members)
     step = jax.vmap(lambda mb, st: _step(mb, st, options))
 
     def more(carry):
         k, st = carry
-        return (k < options.steps) & ~jnp.all(st.done)
+        return (k < steps) & ~jnp.all(st.done)
 
     _, state = jax.lax.while_loop(more, lambda c: (c[0] + 1, step(members, c[1])), (0, state))
     return jax.vmap(lambda mb, p, st: _finish(mb, p, st, options))(members, problem, state)
@@ -352,7 +360,8 @@ def solve_batched(problem: TransportLP, options: NewtonOptions = NewtonOptions()
 
     Args:
       problem: the padded batch (NumPy or JAX arrays).
-      options: step budget and tolerances (static: a new value compiles anew).
+      options: step budget and tolerances (a new value other than ``steps``
+        compiles anew).
       dtype: float dtype of the computation (float64 needs JAX's x64 mode).
 
     Returns:
@@ -372,4 +381,5 @@ def solve_batched(problem: TransportLP, options: NewtonOptions = NewtonOptions()
     require_float64(dtype)
     dtype = np.dtype(dtype)
     problem = TransportLP(*(a.astype(dtype) if a.dtype.kind == "f" else a for a in map(jnp.asarray, problem)))
-    return _solve_jit(problem, options, dtype)
+    # The budget is traced, not static: changing it does not compile anew.
+    return _solve_jit(problem, jnp.asarray(options.steps, jnp.int32), options._replace(steps=0), dtype)

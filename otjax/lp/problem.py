@@ -196,7 +196,7 @@ def group_by_class(problems: Sequence[LocalLP]) -> dict[tuple[int, int, int], li
 
 
 def pack(problems: Sequence[LocalLP], dtype=np.float64, shape: tuple[int, int, int] | None = None,
-         check: bool = True) -> TransportLP:
+         batch: int | None = None, check: bool = True) -> TransportLP:
     """Pads members into one :class:`TransportLP` (NumPy arrays).
 
     Args:
@@ -205,6 +205,9 @@ def pack(problems: Sequence[LocalLP], dtype=np.float64, shape: tuple[int, int, i
       shape: ``(P, K, S)`` capacities; by default the largest capacity class
         among the members (:func:`capacity_class`). A member that does not fit
         raises (nothing is truncated).
+      batch: ``B``, at least ``len(problems)``; by default the power of two
+        that fits them (the batch size is part of the compiled shape too).
+        Members past the problems are empty: no point, no bin, cost 0.
       check: validate each member first (:func:`check_local`).
 
     Example:
@@ -220,7 +223,9 @@ def pack(problems: Sequence[LocalLP], dtype=np.float64, shape: tuple[int, int, i
         classes = member_classes(problems) or ((MIN_POINTS, MIN_BINS, MIN_SIMPLICES),)
         shape = tuple(max(c[a] for c in classes) for a in range(3))
     p_cap, k_cap, s_cap = shape
-    b = len(problems)
+    b = capacity_class(len(problems), 1) if batch is None else batch
+    if b < len(problems):
+        raise ValueError(f"batch {b} is smaller than the {len(problems)} members")
     out = TransportLP(
         cost=np.zeros((b, p_cap, k_cap), dtype), mass=np.zeros((b, p_cap), dtype),
         capacity=np.zeros((b, k_cap), dtype), simplex=np.zeros((b, k_cap), np.int32),

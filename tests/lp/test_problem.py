@@ -10,7 +10,9 @@ from tests.lp.stencils import random_stencil
 def test_pack_then_member_gives_the_member_back(rng):
     members = [random_stencil(rng, p, k, 2, 1) for p, k in ((5, 4), (30, 17), (9, 40))]
     batch = pack(members)
-    assert batch.shape == (3, 32, 64, 4)
+    assert batch.shape == (4, 32, 64, 4)
+    assert not batch.point_mask[3].any() and not batch.bin_mask[3].any() and np.all(batch.mass[3] == 0)
+    assert pack(members, batch=3).shape[0] == 3
     for b, lp in enumerate(members):
         back = member(batch, b)
         for got, want in zip(back, lp):
@@ -31,6 +33,8 @@ def test_capacity_classes_are_powers_of_two_and_group_members(rng):
 def test_a_member_larger_than_the_shape_is_refused(rng):
     with pytest.raises(ValueError, match="exceeds the capacity"):
         pack([random_stencil(rng, 20, 10, 1, 1)], shape=(16, 16, 4))
+    with pytest.raises(ValueError, match="smaller than"):
+        pack([random_stencil(rng, 20, 10, 1, 1)] * 3, batch=2)
 
 
 def good():
