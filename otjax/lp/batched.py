@@ -51,6 +51,9 @@ class NewtonOptions(NamedTuple):
       ridge: curvature added to a facet bin, relative to the curvature
         ``c_j l_s / eps`` it has at its share.
       backtracks: at most this many halvings of a step in the line search.
+      predict: start each ``eps`` from ``g`` extrapolated linearly in ``eps``.
+      chunk: a batch larger than this (and a multiple of it) is solved in
+        chunks of this many members, one after the other (0: never).
     """
 
     steps: int = 48
@@ -63,6 +66,7 @@ class NewtonOptions(NamedTuple):
     ridge: float = 1e-6
     backtracks: int = 12
     predict: bool = True
+    chunk: int = 16
 
 
 class _Member(NamedTuple):
@@ -326,13 +330,25 @@ def _finish(mb: _Member, problem: TransportLP, st: _State, options: NewtonOption
     ok = (cost - lb <= options.rtol * cost + options.atol) & (violation <= options.rtol)
     infeasible = (~problem.bin_mask.any()) & jnp.any(mb.mass > 0)
     finite = jnp.isfinite(cost) & jnp.all(jnp.isfinite(plan))
-    status = jnp.where(infeasible, INFEASIBLE, jnp.where(~finite, FAILED, jnp.where(ok, CONVERGED, ITERATION_LIMIT)))
-    return LPSolution(plan=plan, simplex_mass=received @ of_simplex.astype(plan.dtype), density=density, cost=cost,
-                      lower_bound=lb, violation=violation, status=status.astype(jnp.int8), iterations=st.steps)
+    status = jnp.where(ok, CONVERGED, ITERATION_LIMIT)
+    status = jnp.where(infeasible, INFEASIBLE, jnp.where(finite, status, FAILED)).astype(jnp.int8)
+    return LPSolution(plan=plan, simplex_mass=received @ of_simplex.astype(plan.dtype), density=density,
+                      cost=cost, lower_bound=lb, violation=violation, status=status, iterations=st.steps)
 
 
 @functools.partial(jax.jit, static_argnames=("options", "dtype"))
 def _solve_jit(problem: TransportLP, steps, options: NewtonOptions, dtype) -> LPSolution:
+    b, c = problem.cost.shape[0], options.chunk
+    if not c or b <= c or b % c:
+        return _solve_chunk(problem, steps, options, dtype)
+    # Chunks run one after the other, each until its own members are done:
+    # a chunk's arrays stay in cache and a slow member holds back c others, not b.
+    chunks = jax.tree.map(lambda a: a.reshape(b // c, c, *a.shape[1:]), problem)
+    out = jax.lax.map(lambda p: _solve_chunk(p, steps, options, dtype), chunks)
+    return jax.tree.map(lambda a: a.reshape(b, *a.shape[2:]), out)
+
+
+def _solve_chunk(problem: TransportLP, steps, options: NewtonOptions, dtype) -> LPSolution:
     members = jax.vmap(lambda p: _member(p, dtype))(problem)
     state = jax.vmap(lambda mb: _init_state(mb, options))(members)
     step = jax.vmap(lambda mb, st: _step(mb, st, options))
@@ -355,7 +371,8 @@ def require_float64(dtype) -> None:
                            "`with jax.enable_x64(True):` or pass dtype=np.float32")
 
 
-def solve_batched(problem: TransportLP, options: NewtonOptions = NewtonOptions(), dtype=np.float64) -> LPSolution:
+def solve_batched(problem: TransportLP, options: NewtonOptions = NewtonOptions(),
+                  dtype=np.float64) -> LPSolution:
     """Solves every member of a padded batch within a fixed step budget (JAX arrays out).
 
     Args:
@@ -380,6 +397,7 @@ def solve_batched(problem: TransportLP, options: NewtonOptions = NewtonOptions()
     """
     require_float64(dtype)
     dtype = np.dtype(dtype)
-    problem = TransportLP(*(a.astype(dtype) if a.dtype.kind == "f" else a for a in map(jnp.asarray, problem)))
+    problem = TransportLP(*(a.astype(dtype) if a.dtype.kind == "f" else a
+                            for a in map(jnp.asarray, problem)))
     # The budget is traced, not static: changing it does not compile anew.
     return _solve_jit(problem, jnp.asarray(options.steps, jnp.int32), options._replace(steps=0), dtype)

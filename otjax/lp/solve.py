@@ -16,8 +16,8 @@ import numpy as np
 
 from otjax.lp.batched import NewtonOptions, solve_batched
 from otjax.lp.exact import MemberSolution, solve_exact
-from otjax.lp.problem import (FAILED, ITERATION_LIMIT, LocalLP, LPSolution, TransportLP, group_by_class, member_plan,
-                              pack)
+from otjax.lp.problem import (FAILED, ITERATION_LIMIT, LocalLP, LPSolution, TransportLP, group_by_class,
+                              member_plan, pack)
 
 METHODS = ("auto", "batched", "exact")
 

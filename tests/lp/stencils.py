@@ -20,7 +20,8 @@ def random_stencil(rng: np.random.Generator, n_points: int, n_bins: int, n_facet
     owner = np.concatenate([np.arange(n_facets), rng.integers(0, n_facets, n_facet_bins - n_facets)])
     bary = rng.dirichlet(np.ones(3), n_facet_bins)
     facet_pos = np.einsum("nc,ncd->nd", bary, corners[owner])
-    vertex_pos = corners.reshape(-1, 3)[rng.choice(3 * n_facets, n_vertices, replace=3 * n_facets < n_vertices)]
+    pick = rng.choice(3 * n_facets, n_vertices, replace=3 * n_facets < n_vertices)
+    vertex_pos = corners.reshape(-1, 3)[pick]
     bins = np.concatenate([facet_pos, vertex_pos])
     capacity = rng.uniform(0.5, 1.5, n_facet_bins)
     capacity /= np.bincount(owner, capacity, n_facets)[owner]

@@ -52,7 +52,8 @@ def test_rounded_plans_are_feasible_and_padding_is_empty(compared):
                 assert fast.density[b, s] == pytest.approx(fill.mean(), rel=1e-9, abs=1e-15)
             assert float(fast.cost[b]) == pytest.approx(float(np.sum(x * lp.cost)), rel=1e-12)
             simplex_mass = np.bincount(lp.simplex, received, minlength=lp.n_simplices)
-            np.testing.assert_allclose(fast.simplex_mass[b, :lp.n_simplices], simplex_mass, rtol=1e-12, atol=1e-15)
+            np.testing.assert_allclose(fast.simplex_mass[b, :lp.n_simplices], simplex_mass,
+                                       rtol=1e-12, atol=1e-15)
 
 
 def test_rounded_cost_is_near_the_highs_optimum(compared):

@@ -92,7 +92,8 @@ def test_a_facet_no_point_needs_gets_density_zero():
 
 
 def test_constraints_hold_for_the_optimal_plan(rng):
-    lp = facet_and_vertex(rng.uniform(0, 1, (7, 3)), rng.uniform(0.5, 1.5, 7), vertex_at=[0.5, 0.5, 0.5], facets=2)
+    lp = facet_and_vertex(rng.uniform(0, 1, (7, 3)), rng.uniform(0.5, 1.5, 7), vertex_at=[0.5, 0.5, 0.5],
+                          facets=2)
     a_eq, b_eq = constraints(lp)
     assert a_eq.shape == (7 + 8, 7 * 9 + lp.n_simplices)
     sol = solve_member(lp)
@@ -107,8 +108,8 @@ def test_a_point_without_bins_is_infeasible():
 
 
 def test_padded_batch_matches_members(rng):
-    members = [facet_and_vertex(rng.uniform(0, 1, (n, 3)), rng.uniform(0.5, 1.5, n), vertex_at=[0.5, 0.5, 2.0])
-               for n in (3, 9)]
+    members = [facet_and_vertex(rng.uniform(0, 1, (n, 3)), rng.uniform(0.5, 1.5, n),
+                                vertex_at=[0.5, 0.5, 2.0]) for n in (3, 9)]
     batch = pack(members)
     sol = solve_exact(batch)
     for b, lp in enumerate(members):
