@@ -8,6 +8,7 @@ from otjax.curves.location import CHUNK, locate_pairs
 from otjax.curves.triangulation import Triangulation
 from otjax.predicates import in_triangle_perturbed
 from tests.point_sets import make_points
+from tests.profiles import examples  # CI count, thorough count (--hypothesis-profile=thorough)
 
 
 def rows(tri: np.ndarray, p: np.ndarray):
@@ -21,7 +22,7 @@ def all_pairs(tri: Triangulation, queries: np.ndarray):
     return t[j.ravel()], queries[i.ravel()]
 
 
-@settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@settings(max_examples=examples(100, 1000), deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(kind=st.sampled_from(["uniform", "near_collinear", "clustered", "duplicates", "grid"]),
        n=st.integers(8, 60), seed=st.integers(0, 10_000))
 def test_filtered_location_equals_the_exact_predicate(kind, n, seed):

@@ -16,6 +16,7 @@ from otjax.curves.triangulation import Triangulation, edge_key
 from otjax.predicates import in_triangle_perturbed
 from tests.curves.helpers import collapse_randomly, free_vertices, make_engine, noisy_shape, scratch_cost
 from tests.point_sets import make_points
+from tests.profiles import examples  # CI count, thorough count (--hypothesis-profile=thorough)
 
 log = logging.getLogger(__name__)
 
@@ -75,7 +76,7 @@ def test_batched_delta_equals_scratch_difference(seed):
     log.info("candidates needing flips: %d of %d", flipped, len(cands))
 
 
-@settings(max_examples=15, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@settings(max_examples=examples(15, 1000), deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(kind=st.sampled_from(["uniform", "duplicates", "near_collinear", "grid"]),
        seed=st.integers(0, 2**31 - 1))
 def test_plan_invariants_under_collapses(kind, seed):

@@ -15,6 +15,7 @@ from otjax.curves.decimate import decimate
 from otjax.curves.engine import CurveEngine
 from otjax.curves.triangulation import Triangulation
 from tests.curves.helpers import check_scratch, make_engine, noisy_shape, run_queue
+from tests.profiles import examples  # CI count, thorough count (--hypothesis-profile=thorough)
 
 
 def link_of(tri, v):
@@ -22,7 +23,7 @@ def link_of(tri, v):
     return {tuple(sorted((ring[k], ring[(k + 1) % len(ring)]))) for k in range(len(ring))}
 
 
-@settings(max_examples=12, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@settings(max_examples=examples(12, 1000), deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(queue=st.sampled_from(["exhaustive", "parallel"]), n=st.integers(60, 220), seed=st.integers(0, 10_000),
        subset=st.sampled_from([0.5, 1.0]))
 def test_link_updates_make_the_same_greedy_as_full_rescoring(queue, n, seed, subset):

@@ -8,8 +8,9 @@ from hypothesis import strategies as st
 from otjax.predicates import orient, orient_perturbed
 from otjax.curves.triangulation import Triangulation
 from tests.point_sets import make_points, point_sets
+from tests.profiles import examples  # CI count, thorough count (--hypothesis-profile=thorough)
 
-SETTINGS = settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+SETTINGS = settings(max_examples=examples(40, 1000), deadline=None, suppress_health_check=[HealthCheck.too_slow])
 
 
 def unique_rows(p):
