@@ -5,6 +5,7 @@ import os
 import subprocess
 import sys
 import types
+from fractions import Fraction
 
 import jsonschema
 import numpy as np
@@ -470,6 +471,23 @@ def test_end_to_end_circle(tmp_path, capsys):
     # A closed curve: every vertex has exactly two edges.
     np.testing.assert_array_equal(np.bincount(r.edges.ravel(), minlength=8), 2)
     assert d["params"]["n_vertices"] == 8
+
+
+def test_end_to_end_at_1e_minus_300(tmp_path, capsys):
+    """Coordinates near the bottom of float64's range: the same octagon as at unit scale, the
+    cost given with its power of two (it underflows in input units)."""
+    angle = np.linspace(0, 2 * np.pi, 80, endpoint=False) + 0.1
+    write_points(tmp_path / "tiny.xy", 1e-300 * np.stack([np.cos(angle), np.sin(angle)], 1))
+    out = tmp_path / "tiny.json"
+    assert main(["curve", str(tmp_path / "tiny.xy"), "-n", "8", "-o", str(out), "--no-progress"]) == 0
+    printed = capsys.readouterr().out
+    assert "8 vertices, 8 edges" in printed and "x 2^-" in printed
+    r = CurveResult.load(out)
+    np.testing.assert_allclose(np.linalg.norm(r.vertices / 1e-300, axis=1), 1.0, atol=0.2)
+    np.testing.assert_array_equal(np.bincount(r.edges.ravel(), minlength=8), 2)
+    # In unit-circle units: 80 points of mass 1, each within 0.2 of the octagon.
+    cost = Fraction(r.total_cost) * Fraction(2) ** r.params["cost_exponent"] / Fraction(1e-300) ** 2
+    assert r.params["cost_exponent"] < -1900 and 0 < cost < 80 * 0.2**2
 
 
 def _cli(args, env):
