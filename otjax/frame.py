@@ -14,13 +14,12 @@ The map, for points in a bounding box of diagonal ``D``:
 * back: vertices ``q s + c``, masses ``x 2^mass_exp``, lengths ``x s``,
   costs (mass times squared length) ``x s^2 2^mass_exp``.
 
-Exactness. Dividing by a power of two is exact (no float64 here is
-subnormal after it unless its input was), and ``s``, ``c / s`` and
-``mass_exp`` follow an exact power-of-two scaling of the input, so an input
-scaled by ``2^k`` gives bitwise the same canonical points and masses, hence
-the same computation; the results mapped back are ``2^k`` times the
-unscaled ones bitwise, except components of magnitude below ``2^-1022``
-(subnormal), which are within ``2^-1075``. Translation: ``q`` is one rounded
+Exactness. A product with a power of two is exact unless it is subnormal,
+and ``scale_exp``, ``c`` and ``mass_exp`` follow an exact power-of-two
+scaling of the input, so an input scaled exactly by ``2^k`` gives bitwise the
+same canonical points and masses, hence the same computation; the results
+mapped back are ``2^k`` times the unscaled ones bitwise, except components of
+magnitude below ``2^-1022`` (subnormal), which are within ``2^-1075``. Translation: ``q`` is one rounded
 subtraction, exact when ``p`` and ``c`` share a power-of-two grid fine enough
 for their difference (for instance ``p`` within a factor of two of ``c``, or a
 translation by a multiple of ``s / 2^CENTRE_BITS`` of points on a grid);
