@@ -392,8 +392,9 @@ def solve_batched(problem: TransportLP, options: NewtonOptions = NewtonOptions()
       >>> lp = LocalLP(np.array([[4.0, 1.0]]), np.ones(1), np.array([0.0, 1.0]),
       ...              np.array([0, 1]), np.array([True, False]))
       >>> with jax.enable_x64(True):
-      ...     float(solve_batched(pack([lp])).cost[0])
-      1.0
+      ...     sol = solve_batched(pack([lp]))
+      >>> round(float(sol.cost[0]), 6), int(sol.status[0]) == CONVERGED
+      (1.0, True)
     """
     require_float64(dtype)
     dtype = np.dtype(dtype)

@@ -133,7 +133,8 @@ def solve_exact(batch: TransportLP, members: Sequence[int] | None = None,
       batch: the padded problems.
       members: indices to solve; all by default.
       into: a solution of the same batch whose other members are kept (its
-        arrays are copied, not written in place).
+        arrays are copied, not written in place). Without it, members not
+        solved come back with a zero plan and status :data:`FAILED`.
       time_limit: seconds HiGHS may spend on one member.
 
     Returns:
@@ -144,7 +145,7 @@ def solve_exact(batch: TransportLP, members: Sequence[int] | None = None,
     if into is None:
         out = LPSolution(np.zeros((b, p_cap, k_cap), dtype), np.zeros((b, s_cap), dtype),
                          np.zeros((b, s_cap), dtype), np.zeros(b, dtype), np.zeros(b, dtype),
-                         np.zeros(b, dtype), np.zeros(b, np.int8), np.zeros(b, np.int32))
+                         np.zeros(b, dtype), np.full(b, FAILED, np.int8), np.zeros(b, np.int32))
     else:
         out = LPSolution(*(np.array(a) for a in into))
     for m in range(b) if members is None else members:

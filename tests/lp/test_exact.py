@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from otjax.lp.exact import constraints, solve_exact, solve_member
-from otjax.lp.problem import CONVERGED, INFEASIBLE, LocalLP, pack
+from otjax.lp.problem import CONVERGED, FAILED, INFEASIBLE, LocalLP, pack
 
 # A facet's bins in the plane z = 0 and their capacities (summing to 1).
 FACET_BINS = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.4, 0.4, 0.0]])
@@ -118,4 +118,7 @@ def test_padded_batch_matches_members(rng):
         p, k = lp.cost.shape
         assert np.all(sol.plan[b, p:, :] == 0) and np.all(sol.plan[b, :, k:] == 0)
     only_second = solve_exact(batch, members=[1])
-    assert only_second.cost[0] == 0 and only_second.cost[1] == pytest.approx(sol.cost[1], abs=1e-12)
+    assert only_second.cost[1] == pytest.approx(sol.cost[1], abs=1e-12)
+    assert only_second.status.tolist() == [FAILED, CONVERGED] and np.all(only_second.plan[0] == 0)
+    kept = solve_exact(batch, members=[0], into=only_second)
+    np.testing.assert_allclose(kept.cost, sol.cost, atol=1e-12)
