@@ -36,7 +36,8 @@ from otjax.lp.problem import CONVERGED, FAILED, INFEASIBLE, ITERATION_LIMIT, LPS
 
 
 class NewtonOptions(NamedTuple):
-    """Static settings of :func:`solve_batched` (``docs/decisions.md#lp_solver``).
+    """Settings of :func:`solve_batched` (``docs/decisions.md#lp_solver``); all but
+    ``steps`` are static, so a new value of one compiles the solver anew.
 
     Attributes:
       steps: at most this many steps per member (a fixed budget).
