@@ -9,10 +9,10 @@ The map, for points in a bounding box of diagonal ``D``:
 
 * ``q = p / s - c / s`` with ``s = 2^scale_exp`` the smallest power of two
   ``>= D`` (the canonical diagonal is in ``(1/2, 1]``) and ``c`` the box
-  centre rounded down to a multiple of ``s / 2^CENTRE_BITS``;
-* masses ``m / 2^mass_exp`` with the largest in ``[1/2, 1)``;
-* back: vertices ``q s + c``, masses ``x 2^mass_exp``, lengths ``x s``,
-  costs (mass times squared length) ``x s^2 2^mass_exp``.
+  centre rounded (half up) to a multiple of ``s / 2^CENTRE_BITS``;
+* masses ``m / M`` with ``M`` the largest mass, ``M = mass_mantissa 2^mass_exp``;
+* back: vertices ``q s + c``, masses ``x M``, lengths ``x s``,
+  costs (mass times squared length) ``x s^2 M``.
 
 Exactness. A product with a power of two is exact unless it is subnormal,
 and ``scale_exp``, ``c`` and ``mass_exp`` follow an exact power-of-two
@@ -37,10 +37,13 @@ from typing import NamedTuple
 import numpy as np
 
 # The centre sits on a grid of s / 2^CENTRE_BITS: coarse enough that a translation by
-# a multiple of it moves the centre exactly, fine enough that |q| stays below 1/2 + 2^-10.
-# Rounded down, not to nearest: floor(x + N) = floor(x) + N for an integer N, while
-# round-half-even may break a tie the other way after a translation.
-CENTRE_BITS = 10
+# a multiple of it moves the centre exactly, and that an input within a quarter box of
+# the origin is only scaled (exactly), fine enough that |q| stays below 1/2 + 2^-2
+# (docs/decisions.md#centre_bits).
+# Rounded half up, not half to even: floor(x + 1/2 + N) = floor(x + 1/2) + N for an
+# integer N, while round-half-even may break a tie the other way after a translation; and
+# not down, which puts the common box centred at a multiple of the grid on a rounding edge.
+CENTRE_BITS = 2
 # Input coordinates must stay below this so that results in input units (vertices up to
 # a box diagonal outside the points) cannot overflow.
 MAX_COORDINATE = 2.0**1022
@@ -51,15 +54,18 @@ class Frame(NamedTuple):
     """A canonical frame (see the module doc).
 
     Attributes:
-      centre: ``(d,)`` float64, the box centre rounded down to the grid, in input units.
+      centre: ``(d,)`` float64, the box centre rounded to the grid, in input units.
       scale_exp: ``s = 2^scale_exp`` (kept as an exponent: ``s`` itself may
         not be a finite float64).
-      mass_exp: the mass unit is ``2^mass_exp``.
+      mass_exp, mass_mantissa: the mass unit is ``mass_mantissa * 2^mass_exp``
+        (the largest input mass; ``mass_mantissa`` in ``[1/2, 1)``), so that
+        equal masses of any size all become exactly 1.
     """
 
     centre: np.ndarray
     scale_exp: int
     mass_exp: int
+    mass_mantissa: float = 1.0
 
     def points_in(self, points: np.ndarray) -> np.ndarray:
         """``(n, d)`` input points to canonical coordinates."""
@@ -74,12 +80,12 @@ class Frame(NamedTuple):
         return float(np.ldexp(x, -self.scale_exp))
 
     def masses_in(self, masses: np.ndarray) -> np.ndarray:
-        """``(n,)`` masses in canonical units."""
-        return np.ldexp(masses, -self.mass_exp)
+        """``(n,)`` masses in canonical units (one rounding each; exact for the largest)."""
+        return np.ldexp(masses, -self.mass_exp) / self.mass_mantissa
 
     def masses_out(self, m) -> np.ndarray:
         """Masses (``edge_mass``, transported masses) in input units."""
-        return np.ldexp(np.asarray(m, np.float64), self.mass_exp)
+        return np.ldexp(np.asarray(m, np.float64) * self.mass_mantissa, self.mass_exp)
 
     def cost_out(self, cost: float) -> tuple[float, int]:
         """A cost (mass times squared length) in input units, as ``(value, exponent)``.
@@ -90,11 +96,12 @@ class Frame(NamedTuple):
         and ``exponent = 2 scale_exp + mass_exp``, so no digit is lost.
         """
         exponent = 2 * self.scale_exp + self.mass_exp
+        cost = float(cost) * self.mass_mantissa
         with np.errstate(over="ignore", under="ignore"):
-            value = float(np.ldexp(float(cost), exponent))
+            value = float(np.ldexp(cost, exponent))
         if value == 0.0 and cost == 0.0 or np.isfinite(value) and value >= _TINY:
             return value, 0
-        return float(cost), exponent
+        return cost, exponent
 
 
 def _power_of_two_at_least(x: float) -> int:
@@ -142,10 +149,12 @@ def canonical_frame(points: np.ndarray, masses: np.ndarray) -> Frame:
     centre = mid.copy()
     # |mid| >= 2^53 grid: mid is already a multiple of the grid.
     near = np.frexp(mid)[1] <= 53 + grid_exp  # |mid| < 2^(53 + grid_exp), compared in exponents
-    centre[near] = np.ldexp(np.floor(np.ldexp(mid[near], -grid_exp)), grid_exp)
+    centre[near] = np.ldexp(np.floor(np.ldexp(mid[near], -grid_exp) + 0.5), grid_exp)
     centre = np.ldexp(centre, e_big)  # exact: a multiple of 2^(grid_exp + e_big) >= 2^-1074
     scale_exp += e_big
-    return Frame(centre, scale_exp, _mass_exp(masses))
+    mass_exp = _mass_exp(masses)
+    mantissa = float(np.ldexp(np.asarray(masses, np.float64).max(), -mass_exp))
+    return Frame(centre, scale_exp, mass_exp, mantissa)
 
 
 def _mass_exp(masses: np.ndarray) -> int:

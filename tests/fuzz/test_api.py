@@ -13,6 +13,7 @@ from hypothesis import strategies as st
 
 import otjax.curves.reconstruct as reconstruct_module
 from otjax.curves.decimate import QUEUES
+from otjax.frame import CENTRE_BITS
 from otjax.curves.reconstruct import reconstruct_curve
 from tests.fuzz.strategies import check_result, warnings_are_errors
 from tests.profiles import examples
@@ -116,7 +117,7 @@ def stop_after_validation(monkeypatch):
 
     def spy(points, masses, params, progress):
         assert points.ndim == 2 and points.shape[1] == 2 and len(points) >= 3
-        assert np.isfinite(points).all() and np.abs(points).max() < 0.5 + 2.0**-10  # the canonical frame
+        assert np.isfinite(points).all() and np.abs(points).max() < 0.5 + 2.0**-CENTRE_BITS  # the canonical frame
         assert len(np.unique(points, axis=0)) == len(points)
         assert masses.shape == (len(points),) and np.isfinite(masses).all() and np.all(masses >= 0)
         assert masses.sum() > 0
