@@ -76,8 +76,10 @@ class Frame(NamedTuple):
         return np.ldexp(np.asarray(q, np.float64), self.scale_exp) + self.centre
 
     def length_in(self, x: float) -> float:
-        """A length (a distance tolerance) in canonical units."""
-        return float(np.ldexp(x, -self.scale_exp))
+        """A length (a distance tolerance) in canonical units; ``inf`` past float64, where
+        it is longer than anything in the canonical box anyway."""
+        with np.errstate(over="ignore", under="ignore"):
+            return float(np.ldexp(x, -self.scale_exp))
 
     def masses_in(self, masses: np.ndarray) -> np.ndarray:
         """``(n,)`` masses in canonical units (one rounding each; exact for the largest)."""

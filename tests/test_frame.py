@@ -149,3 +149,10 @@ def test_a_tolerance_maps_in_exactly():
     frame, _, _ = to_canonical(np.array([[0.0, 0], [3.0, 0], [0, 4.0]]), np.ones(3))
     assert frame.scale_exp == 3  # diagonal 5 -> s = 8
     assert frame.length_in(0.3) == 0.3 / 8
+
+
+def test_a_tolerance_past_float64_in_canonical_units_is_infinite_without_a_warning():
+    tiny, _, _ = to_canonical(np.array([[0.0, 0], [3e-300, 0], [0, 4e-300]]), np.ones(3))
+    assert tiny.length_in(1e300) == np.inf  # pytest turns a RuntimeWarning into an error
+    huge, _, _ = to_canonical(np.array([[0.0, 0], [3e300, 0], [0, 4e300]]), np.ones(3))
+    assert huge.length_in(1e-300) == 0.0
