@@ -191,10 +191,12 @@ def to_canonical(points, masses) -> tuple[Frame, np.ndarray, np.ndarray]:
     points = np.asarray(points, np.float64)
     frame = canonical_frame(points, masses)
     q = frame.points_in(points)
-    # Rows whose subtraction was exact cannot collide: (q + c/s) recovers p/s. Only if some
-    # row was rounded is the (sorting) duplicate check worth its time.
+    # Rows mapped exactly cannot collide: p/s did not underflow (it scales back to p) and
+    # (q + c/s) recovers p/s. Only if some row was rounded is the (sorting) duplicate
+    # check worth its time.
+    scaled = np.ldexp(points, -frame.scale_exp)
     shift = np.ldexp(frame.centre, -frame.scale_exp)
-    if np.any(q + shift != np.ldexp(points, -frame.scale_exp)):
+    if np.any(np.ldexp(scaled, frame.scale_exp) != points) or np.any(q + shift != scaled):
         _, first, inverse = np.unique(q + 0.0, axis=0, return_index=True, return_inverse=True)
         if len(first) < len(q):
             inverse = inverse.reshape(-1)
@@ -203,6 +205,6 @@ def to_canonical(points, masses) -> tuple[Frame, np.ndarray, np.ndarray]:
             raise ValueError(
                 f"points {i} and {j} ({points[i].tolist()} and {points[j].tolist()}) are distinct but "
                 "closer than float64 resolves at the scale of the bounding box: they coincide once "
-                "translated to its centre; merge or move them"
+                "translated to its centre and scaled to its size; merge or move them"
             )
     return frame, q, frame.masses_in(np.asarray(masses, np.float64))

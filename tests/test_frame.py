@@ -106,6 +106,8 @@ def test_extreme_but_valid_inputs_are_accepted():
         ([[0, 0], [1, 0], [0, 1]], [1.7e308, 1.7e308, 1e300], ["total mass overflows"]),
         ([[0, 0], [1e-20, 0], [1, 0], [1, 1]], None, ["points 0 and 1", "closer than float64 resolves"]),
         ([[1e12, 0], [1e12, 1e-18], [1e12 + 1, 0], [1e12, 1]], None, ["points 0 and 1", "closer than float64"]),
+        # Collapsed by the scaling itself (the third point's y underflows), not by the translation.
+        ([[0, 0], [0, 6.90174635e69], [0, 2.71128045e-254]], None, ["points 0 and 2", "closer than float64"]),
     ],
 )
 def test_input_float64_cannot_hold_after_normalising_is_refused(points, masses, words):
