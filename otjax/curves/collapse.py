@@ -93,7 +93,12 @@ def orient_ids(xy: list, a: int, b: int, c: int) -> int:
 
 
 class _Ring:
-    """The one-ring polygon of a collapse being planned, and its tests."""
+    """The one-ring polygon of a collapse being planned, and its tests.
+
+    Planning asks for the side of ``target`` against each polygon edge and
+    for each edge's cut several times (once per clip); both depend on the
+    edge alone, so they are computed once per edge.
+    """
 
     def __init__(self, tri, source: int, target: int, ring):
         self.xy = tri.xy
@@ -101,20 +106,34 @@ class _Ring:
         self.source, self.target = source, target
         self.poly = list(ring)
         self._span = None  # |target - source|, read by cut only: most collapses need no flip
+        self._side: dict[tuple[int, int], int] = {}
+        self._cut: dict[tuple[int, int], float] = {}
+
+    def side(self, a: int, b: int) -> int:
+        """Exact orientation of ``(target, a, b)``."""
+        hit = self._side.get((a, b))
+        if hit is None:
+            hit = self._side[(a, b)] = orient_ids(self.xyl, self.target, a, b)
+        return hit
 
     def cut(self, a: int, b: int) -> float:
         """Distance from target to where line ``(a, b)`` crosses source -> target:
         how much removing ``(a, b)`` from the polygon elongates its kernel."""
-        xy, source, target = self.xy, self.source, self.target
-        if orient_ids(self.xyl, target, a, b) > 0:
+        hit = self._cut.get((a, b))
+        if hit is not None:
+            return hit
+        if self.side(a, b) > 0:
+            self._cut[(a, b)] = 0.0
             return 0.0
+        xy, source, target = self.xy, self.source, self.target
         e = xy[b] - xy[a]
         da = float(e[0] * (xy[source, 1] - xy[a, 1]) - e[1] * (xy[source, 0] - xy[a, 0]))
         db = float(e[0] * (xy[target, 1] - xy[a, 1]) - e[1] * (xy[target, 0] - xy[a, 0]))
         s = da / (da - db) if da != db else 1.0
         if self._span is None:
             self._span = float(np.hypot(*(xy[target] - xy[source])))
-        return (1.0 - min(max(s, 0.0), 1.0)) * self._span
+        out = self._cut[(a, b)] = (1.0 - min(max(s, 0.0), 1.0)) * self._span
+        return out
 
     def is_ear(self, j: int, with_source: bool) -> bool:
         """Whether polygon vertex ``j`` may leave the polygon: by the paper's
@@ -143,7 +162,7 @@ class _Ring:
         out = []
         for k in range(n):
             a, b = poly[k], poly[(k + 1) % n]
-            if target not in (a, b) and orient_ids(self.xyl, target, a, b) <= 0:
+            if target not in (a, b) and self.side(a, b) <= 0:
                 out.append((self.cut(a, b), k))
         out.sort(key=lambda t: (-t[0], t[1]))
         return out
@@ -166,6 +185,23 @@ class _Ring:
                 if options:
                     return min(options)[1]
         return next(j for j in range(n) if self.is_ear(j, False))
+
+
+class Flips(NamedTuple):
+    """The flip part of a collapse plan: what depends on the star of the
+    source alone (its ring's positions included), not on the target's.
+
+    Attributes:
+      ring, star: as in :class:`CollapsePlan`.
+      clipped, flipped_out: as in :class:`CollapsePlan`.
+      polygon: the one-ring polygon left once the flips are made (CCW).
+    """
+
+    ring: tuple[int, ...]
+    star: tuple[int, ...]
+    clipped: tuple[int, ...]
+    flipped_out: tuple[tuple[int, int, int], ...]
+    polygon: tuple[int, ...]
 
 
 def plan_collapse(tri, source: int, target: int) -> CollapsePlan | None:
@@ -197,6 +233,21 @@ def plan_collapse(tri, source: int, target: int) -> CollapsePlan | None:
       The plan, or ``None`` if an end is pinned, the vertices are not
       adjacent, or the link condition fails after the flips.
     """
+    flips = plan_flips(tri, source, target)
+    return None if flips is None else plan_from_flips(tri, source, target, flips)
+
+
+def plan_flips(tri, source: int, target: int) -> Flips | None:
+    """The flips of :func:`plan_collapse`, before its link condition.
+
+    They depend on the star of ``source`` and the positions of its ring
+    only, so a cache may keep them while the target's star changes
+    (:func:`plan_from_flips` then checks the link condition again).
+
+    Returns:
+      The :class:`Flips`, or ``None`` if an end is pinned or the vertices
+      are not adjacent.
+    """
     if tri.pinned[source] or tri.pinned[target]:
         return None
     ring, star = tri.star(source)
@@ -212,14 +263,22 @@ def plan_collapse(tri, source: int, target: int) -> CollapsePlan | None:
         flipped_out.append((poly[chosen - 1], a, poly[(chosen + 1) % n]))
         clipped.append(a)
         del poly[chosen]
-    if not _link_after_flips(tri, target, poly, flipped_out):
+    return Flips(tuple(ring), tuple(star), tuple(clipped), tuple(flipped_out), tuple(poly))
+
+
+def plan_from_flips(tri, source: int, target: int, flips: Flips) -> CollapsePlan | None:
+    """The :class:`CollapsePlan` of ``flips`` (from :func:`plan_flips` of
+    the same half-edge, its source's star unchanged since), or ``None`` if
+    the link condition fails after the flips."""
+    poly = flips.polygon
+    if not _link_after_flips(tri, target, poly, flips.flipped_out):
         return None
     n = len(poly)
     fan = tuple((target, poly[k], poly[(k + 1) % n]) for k in range(n) if target not in (poly[k], poly[(k + 1) % n]))
-    return CollapsePlan(source, target, tuple(ring), tuple(star), tuple(clipped), tuple(flipped_out), fan)
+    return CollapsePlan(source, target, flips.ring, flips.star, flips.clipped, flips.flipped_out, fan)
 
 
-def _link_after_flips(tri, target: int, poly: list[int], flipped_out) -> bool:
+def _link_after_flips(tri, target: int, poly, flipped_out) -> bool:
     """The link condition of ``(source, target)`` once the flips are made."""
     nb = tri.interior_neighbors(target)
     for c, _, b in flipped_out:  # the new diagonal (c, b)

@@ -19,7 +19,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from otjax.curves.collapse import CollapsePlan, MovePlan, plan_collapse
+from otjax.curves.collapse import CollapsePlan, MovePlan, plan_flips, plan_from_flips
 
 _NO_IDS = np.zeros(0, np.int64)
 
@@ -151,22 +151,31 @@ class StencilCache:
         self.log = log
         self.max_source_degree = max_source_degree
         self._regions: dict[int, tuple[int, Region]] = {}
-        self._plans: dict[tuple[int, int], tuple[tuple[int, int], CollapsePlan | None]] = {}
+        # (source, target) -> (source's star version, target's, Flips | None, CollapsePlan | None)
+        self._plans: dict[tuple[int, int], tuple] = {}
 
     def forget(self, v: int) -> None:
         """Drops the region of a removed vertex (memory only: stamps tell stale entries)."""
         self._regions.pop(v, None)
 
     def collapse_plan(self, source: int, target: int) -> CollapsePlan | None:
-        """The collapse plan of a half-edge, cached until the star of either end changes."""
+        """The collapse plan of a half-edge, cached until the star of either end changes.
+
+        Its flips depend on the source's star alone: a change of the
+        target's star only asks for the link condition again.
+        """
         key = (source, target)
         sv = self.log.star_version
-        stamp = (sv[source], sv[target])
+        s_stamp, t_stamp = sv[source], sv[target]
         hit = self._plans.get(key)
-        if hit is not None and hit[0] == stamp:
-            return hit[1]
-        plan = plan_collapse(self.plan.tri, source, target)
-        self._plans[key] = (stamp, plan)
+        if hit is not None and hit[0] == s_stamp:
+            if hit[1] == t_stamp:
+                return hit[3]
+            flips = hit[2]
+        else:
+            flips = plan_flips(self.plan.tri, source, target)
+        plan = None if flips is None else plan_from_flips(self.plan.tri, source, target, flips)
+        self._plans[key] = (s_stamp, t_stamp, flips, plan)
         return plan
 
     def region(self, v: int) -> Region:
