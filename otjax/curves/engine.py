@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import itertools
 import time
+from collections import OrderedDict
 from typing import NamedTuple
 
 import numpy as np
@@ -35,6 +36,11 @@ from otjax.curves.triangulation import Triangulation
 # Collapses whose stencil has fewer rows are scored again in full rather than
 # updated on their link (docs/decisions.md#update_min_rows).
 UPDATE_MIN_ROWS = 512
+# Rows of the scoring calls whose stencils stay at hand for take (the
+# latest calls'). The winner of a step was usually scored a few dozen calls
+# before; one not at hand is exported and scored again. The bound keeps
+# memory at tens of megabytes.
+HOT_ROWS = 1 << 18
 
 
 class Scored(NamedTuple):
@@ -83,7 +89,12 @@ class CurveEngine:
         self.update_min_rows = update_min_rows
         self.counts = {"scored": 0, "updated": 0, "partial": 0}
         self.seconds = {"export": 0.0, "score": 0.0}
-        self._hot: dict = {}  # key -> (Scored, version): the latest scoring call's stencils
+        # {source: {target: (Scored, version, call)}}: the stencils of the latest
+        # scoring calls, by call in _hot_calls ({call: (rows, keys)}, oldest first).
+        self._hot: dict[int, dict] = {}
+        self._hot_calls: OrderedDict = OrderedDict()
+        self._hot_rows = 0
+        self._calls = 0
         self._records: dict[int, dict] = {}  # {source: {target: LinkRecord}}
         self._partial: dict = {}  # key -> Partial, within one score call
         keys, parts = self.plan.points_by_edge()
@@ -140,7 +151,6 @@ class CurveEngine:
         Returns:
           ``[(half-edge, delta)]`` of the admissible candidates.
         """
-        self._hot = {}
         sources = sorted(sources)
         full, updates, partial = sources, [], []
         tracking = self.incremental and veto is None and targets is None
@@ -196,6 +206,8 @@ class CurveEngine:
 
     def _settle(self, batch, handle, entered: list, veto, keep: bool, tracking: bool) -> None:
         """Reads a dispatched batch into ``entered`` (and records, hot stencils)."""
+        kept: list = []
+        call = self._calls = self._calls + 1
         for c, r in zip(batch.cands, self._collect(batch, handle)):
             key = (c.plan.source, c.plan.target)
             part = self._partial.pop(key, None)
@@ -214,7 +226,23 @@ class CurveEngine:
                 delta = rec.delta(c.before)
             entered.append((key, delta))
             if keep:
-                self._hot[key] = (Scored(c, r), self.log.version[key[0]])
+                self._hot.setdefault(key[0], {})[key[1]] = (Scored(c, r), self.log.version[key[0]], call)
+                kept.append(key)
+        if kept:
+            self._keep_hot(call, len(batch.row_point), kept)
+
+    def _keep_hot(self, call: int, rows: int, keys: list) -> None:
+        """Registers the hot stencils of one call, dropping the oldest calls'
+        beyond :data:`HOT_ROWS` rows."""
+        self._hot_calls[call] = (rows, keys)
+        self._hot_rows += rows
+        while self._hot_rows > HOT_ROWS and len(self._hot_calls) > 1:
+            old, (n, old_keys) = self._hot_calls.popitem(last=False)
+            self._hot_rows -= n
+            for s, t in old_keys:
+                targets = self._hot.get(s)
+                if targets is not None and t in targets and targets[t][2] == old:
+                    del targets[t]
 
     def _split(self, sources):
         """Sources' half-edges to score in full (``{source: targets}``),
@@ -248,8 +276,10 @@ class CurveEngine:
         again: dict[int, list[int]] = {}
         version = self.log.version
         for key in keys:
-            h = self._hot.pop(key, None)
-            if h is not None and h[1] == version[key[0]]:
+            h = self._hot.get(key[0], {}).pop(key[1], None)
+            # The plan too: a change of the target's star alone can change it.
+            if (h is not None and h[1] == version[key[0]]
+                    and self.stencils.collapse_plan(*key) == h[0].candidate.plan):
                 out[key] = h[0]
             else:
                 again.setdefault(key[0], []).append(key[1])
@@ -268,6 +298,8 @@ class CurveEngine:
         change = self.plan.apply(candidate, cost)
         self.log.record(change)
         self.stencils.forget(change.source)
+        for v in change.touched | {change.source}:  # their stencils are stale now
+            self._hot.pop(v, None)
         return change
 
     def movable(self, v: int) -> bool:
