@@ -2,15 +2,25 @@
 
 The oracle the batched solver is tested against, and the fallback for its
 members that did not converge. Variables are the plan ``x_ij`` (row-major)
-and one density ``l_s`` per simplex id; constraints are sparse.
+and one density ``l_s`` per simplex id; constraints are sparse and built
+column-wise straight into HiGHS's own matrix (``highspy``, one solver object
+per process, options set once): through ``scipy.optimize.linprog`` the
+checks and conversions around a small LP cost twice the solve itself.
+
+A member whose every point has a cheapest bin that is unconstrained (a
+vertex bin, or the only bin of its facet: uniformity then binds nothing) is
+solved in closed form: each point to such a bin attains the bound that
+ignores uniformity, so no plan is cheaper.
 """
 
 from __future__ import annotations
 
 from typing import NamedTuple, Sequence
 
+import threading
+
+import highspy
 import numpy as np
-import scipy.optimize
 import scipy.sparse
 
 from otjax.lp.problem import (CONVERGED, FAILED, INFEASIBLE, ITERATION_LIMIT, LocalLP, LPSolution,
@@ -19,7 +29,13 @@ from otjax.lp.problem import (CONVERGED, FAILED, INFEASIBLE, ITERATION_LIMIT, Lo
 # HiGHS's defaults (1e-7) are looser than the analytic tests' 1e-8.
 TOLERANCE = 1e-10
 
-_HIGHS_STATUS = {0: CONVERGED, 1: ITERATION_LIMIT, 2: INFEASIBLE}
+_MODEL_STATUS = {
+    highspy.HighsModelStatus.kOptimal: CONVERGED,
+    highspy.HighsModelStatus.kInfeasible: INFEASIBLE,
+    highspy.HighsModelStatus.kIterationLimit: ITERATION_LIMIT,
+    highspy.HighsModelStatus.kTimeLimit: ITERATION_LIMIT,
+}
+_LOCAL = threading.local()  # one HiGHS object per thread: it holds the model
 
 
 class MemberSolution(NamedTuple):
@@ -79,7 +95,8 @@ def simplex_totals(plan: np.ndarray, lp: LocalLP, n_simplices: int) -> tuple[np.
 
 
 def solve_member(lp: LocalLP, time_limit: float | None = None) -> MemberSolution:
-    """The optimal plan of one member, by HiGHS.
+    """The optimal plan of one member, by HiGHS (or in closed form, see the
+    module docstring).
 
     A member with points but no bin is :data:`INFEASIBLE`; HiGHS's other
     stops (iteration or time limit: :data:`ITERATION_LIMIT`; numerical
@@ -97,18 +114,107 @@ def solve_member(lp: LocalLP, time_limit: float | None = None) -> MemberSolution
         return MemberSolution(np.zeros((0, k)), np.zeros(s), np.zeros(s), 0.0, CONVERGED)
     if k == 0:
         return MemberSolution(np.zeros((p, 0)), np.zeros(s), np.zeros(s), 0.0, INFEASIBLE)
-    a_eq, b_eq = constraints(lp)
-    c = np.concatenate([np.asarray(lp.cost, float).ravel(), np.zeros(s)])
-    options = {"primal_feasibility_tolerance": TOLERANCE, "dual_feasibility_tolerance": TOLERANCE}
-    if time_limit is not None:
-        options["time_limit"] = float(time_limit)
-    res = scipy.optimize.linprog(c, A_eq=a_eq, b_eq=b_eq, bounds=(0, None), method="highs", options=options)
-    status = _HIGHS_STATUS.get(res.status, FAILED)
-    if status != CONVERGED or res.x is None:
-        return MemberSolution(np.zeros((p, k)), np.zeros(s), np.zeros(s), 0.0, status, int(res.nit))
-    plan = np.maximum(res.x[: p * k].reshape(p, k), 0.0)
+    cost = np.asarray(lp.cost, np.float64)
+    free = unconstrained_bins(lp)
+    plan = _closed_form(cost, np.asarray(lp.mass, np.float64), free)
+    iterations = 0
+    if plan is None:
+        status, plan, iterations = _highs(lp, cost, free, time_limit)
+        if status != CONVERGED:
+            return MemberSolution(np.zeros((p, k)), np.zeros(s), np.zeros(s), 0.0, status, iterations)
     mass, density = simplex_totals(plan, lp, s)
-    return MemberSolution(plan, density, mass, float(np.sum(plan * lp.cost)), CONVERGED, int(res.nit))
+    return MemberSolution(plan, density, mass, float(np.sum(plan * cost)), CONVERGED, iterations)
+
+
+def unconstrained_bins(lp: LocalLP) -> np.ndarray:
+    """``(K,)`` bool: bins whose mass no uniformity constraint ties to another
+    bin's (vertex bins, and the only bin of a facet)."""
+    simplex = np.asarray(lp.simplex, np.int64)
+    vertex = np.asarray(lp.is_vertex, bool)
+    if len(simplex) == 0:
+        return vertex
+    per_facet = np.bincount(simplex[~vertex], minlength=int(simplex.max()) + 1)
+    return vertex | (per_facet[simplex] == 1)
+
+
+def _closed_form(cost: np.ndarray, mass: np.ndarray, free: np.ndarray) -> np.ndarray | None:
+    """Each point on its cheapest bin if every point has a cheapest bin that
+    is unconstrained (then the plan attains the bound that drops uniformity,
+    hence is optimal); None otherwise."""
+    if not np.any(free):
+        return None
+    free_cost = np.where(free[None, :], cost, np.inf)
+    best = np.argmin(free_cost, axis=1)
+    rows = np.arange(len(cost))
+    if np.any(free_cost[rows, best] > cost.min(axis=1)):
+        return None
+    plan = np.zeros_like(cost)
+    plan[rows, best] = mass
+    return plan
+
+
+def _solver() -> highspy.Highs:
+    h = getattr(_LOCAL, "highs", None)
+    if h is None:
+        h = highspy.Highs()
+        h.setOptionValue("output_flag", False)
+        h.setOptionValue("primal_feasibility_tolerance", TOLERANCE)
+        h.setOptionValue("dual_feasibility_tolerance", TOLERANCE)
+        _LOCAL.highs = h
+    return h
+
+
+def _highs(lp: LocalLP, cost: np.ndarray, free: np.ndarray, time_limit: float | None):
+    """``(status, plan, iterations)`` of one member solved by HiGHS.
+
+    The matrix is built column-wise: column ``x_ij`` has a 1 in point row
+    ``i`` and, for a constrained bin, a 1 in that bin's row; column ``l_s``
+    has ``-c_j`` in the rows of its facet's bins. Unconstrained bins get no
+    row (their uniformity equation is ``x = l``, satisfied by a free ``l``).
+    """
+    p, k = cost.shape
+    s = lp.n_simplices
+    simplex = np.asarray(lp.simplex, np.int64)
+    con = np.flatnonzero(~free)
+    con = con[np.argsort(simplex[con], kind="stable")]
+    row_of = np.full(k, -1)
+    row_of[con] = p + np.arange(len(con))
+    per_x = 1 + (row_of >= 0)
+    counts = np.concatenate([np.tile(per_x, p), np.bincount(simplex[con], minlength=s)])
+    start = np.concatenate([[0], np.cumsum(counts)])
+    nnz = int(start[-1])
+    index = np.empty(nnz, np.int32)
+    value = np.ones(nnz)
+    first = start[:p * k]
+    index[first] = np.repeat(np.arange(p), k)
+    second = np.flatnonzero(np.tile(row_of >= 0, p))
+    index[first[second] + 1] = np.tile(row_of, p)[second]
+    index[start[p * k]:] = row_of[con]
+    value[start[p * k]:] = -np.asarray(lp.capacity, np.float64)[con]
+
+    model = highspy.HighsLp()
+    model.num_col_ = p * k + s
+    model.num_row_ = p + len(con)
+    model.col_cost_ = np.concatenate([cost.ravel(), np.zeros(s)])
+    model.col_lower_ = np.zeros(p * k + s)
+    model.col_upper_ = np.full(p * k + s, highspy.kHighsInf)
+    bound = np.concatenate([np.asarray(lp.mass, np.float64), np.zeros(len(con))])
+    model.row_lower_ = bound
+    model.row_upper_ = bound
+    model.a_matrix_.format_ = highspy.MatrixFormat.kColwise
+    model.a_matrix_.start_ = start.astype(np.int32)
+    model.a_matrix_.index_ = index
+    model.a_matrix_.value_ = value
+    h = _solver()
+    h.setOptionValue("time_limit", highspy.kHighsInf if time_limit is None else float(time_limit))
+    h.passModel(model)
+    h.run()
+    status = _MODEL_STATUS.get(h.getModelStatus(), FAILED)
+    iterations = int(h.getInfo().simplex_iteration_count)
+    if status != CONVERGED:
+        return status, None, iterations
+    x = np.asarray(h.getSolution().col_value[:p * k], np.float64)
+    return status, np.maximum(x.reshape(p, k), 0.0), iterations
 
 
 def marginal_violation(plan: np.ndarray, lp: LocalLP) -> float:

@@ -215,31 +215,35 @@ class SurfacePlan:
         """The local problem of the points on these simplices (partial masses).
 
         Every listed simplex's bins are in the LP, whether or not it carries
-        mass now; facets get their bins made if they have none.
+        mass now; facets get their bins made if they have none. The current
+        cost is read off the LP's own cost matrix at the current entries, so
+        it is the same sum the solved plan is compared with.
         """
         vertices = tuple(sorted(int(v) for v in vertices))
         facets = tuple(sorted(triangle_key(*t) for t in facets))
         self.ensure_bins(facets)
-        parts = [e for e in (self.entries(s) for s in vertices + facets) if e is not None]
-        cost = sum(self.simplex_cost(s) for s in vertices + facets)
+        counts = [1] * len(vertices) + [len(self.bins[t].capacity) for t in facets]
+        offsets = np.concatenate([[0], np.cumsum(counts)])
+        parts = [(s, e) for s, e in enumerate(map(self.entries, vertices + facets)) if e is not None]
         if parts:
-            pts = np.concatenate([e.point for e in parts])
-            mass = np.concatenate([e.mass for e in parts])
+            pts = np.concatenate([e.point for _, e in parts])
+            mass = np.concatenate([e.mass for _, e in parts])
+            col = np.concatenate([offsets[s] + e.bin for s, e in parts])
             points, inverse = np.unique(pts, return_inverse=True)
             partial = np.bincount(inverse, weights=mass, minlength=len(points))
         else:
-            points, partial = np.zeros(0, np.int64), np.zeros(0)
+            points, partial, inverse = np.zeros(0, np.int64), np.zeros(0), np.zeros(0, np.int64)
+            mass, col = np.zeros(0), np.zeros(0, np.int64)
         pos = [self.complex.positions[list(vertices)]] + [self.bin_positions(t) for t in facets]
         bins = np.concatenate(pos) if pos else np.zeros((0, 3))
-        counts = [1] * len(vertices) + [len(self.bins[t].capacity) for t in facets]
         simplex = np.repeat(np.arange(len(counts)), counts)
-        bin_of = np.concatenate([np.zeros(len(vertices), np.int64)]
-                                + [np.arange(n, dtype=np.int64) for n in counts[len(vertices):]])
+        bin_of = np.arange(int(offsets[-1]), dtype=np.int64) - offsets[simplex]
         capacity = np.concatenate([np.zeros(len(vertices))] + [self.bins[t].capacity for t in facets])
         diff = self.points[points][:, None, :] - bins[None, :, :]
-        lp = LocalLP(np.einsum("pkd,pkd->pk", diff, diff), partial, capacity, simplex,
-                     simplex < len(vertices))
-        return Stencil(lp, points, vertices, facets, bin_of, float(cost))
+        cost_matrix = np.einsum("pkd,pkd->pk", diff, diff)
+        lp = LocalLP(cost_matrix, partial, capacity, simplex, simplex < len(vertices))
+        cost = float(np.sum(mass * cost_matrix[inverse, col]))
+        return Stencil(lp, points, vertices, facets, bin_of, cost)
 
     @staticmethod
     def sparsified(stencil: Stencil, plan: np.ndarray) -> np.ndarray:

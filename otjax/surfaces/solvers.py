@@ -13,6 +13,7 @@ from typing import Sequence
 import numpy as np
 
 from otjax.lp.batched import NewtonOptions
+from otjax.lp.exact import solve_member
 from otjax.lp.problem import LocalLP
 from otjax.lp.solve import solve_members
 from otjax.surfaces.relaxation import LocalSolution
@@ -38,6 +39,10 @@ class LocalSolver:
         self.exact_resolves = 0
 
     def __call__(self, problems: Sequence[LocalLP]) -> list[LocalSolution]:
+        if self.method == "exact":
+            # One member at a time either way: no padding into a batch and out again.
+            self.solved += len(problems)
+            return [LocalSolution(s.plan, s.cost, s.status) for s in map(solve_member, problems)]
         result = solve_members(problems, self.method, self.options, self.dtype)
         self.solved += len(problems)
         self.exact_resolves += result.exact_resolves
