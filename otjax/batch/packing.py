@@ -118,7 +118,16 @@ def choose_packing(sizes, budget: int, capacity: Callable[..., int], shape_for: 
       >>> choose_packing([(3, 0, 0), (3, 0, 0), (3, 0, 0)], 16, cap, lambda need: need, 4)
       [[0, 1, 2]]
     """
-    small = not sizes or max(s[0] for s in sizes) <= budget // SMALL_JOB
+    if not sizes:
+        return []
+    totals = [sum(col) for col in zip(*sizes)]
+    one = min(min_rows, budget)
+    if totals[0] <= one and capacity(*totals, len(sizes)) <= one:
+        # Everything fits one smallest batch: every packing below is that
+        # one batch (capacities grow with the totals), found without a
+        # capacity call per job.
+        return [list(range(len(sizes)))]
+    small = max(s[0] for s in sizes) <= budget // SMALL_JOB
     packing = (pack_next_fit if small else pack_first_fit)(sizes, budget, capacity)
     if min_rows < budget and sum(s[0] for s in sizes) <= 2 * budget:
         other = pack_first_fit(sizes, min_rows, capacity)
