@@ -151,7 +151,7 @@ class StencilCache:
         self.log = log
         self.max_source_degree = max_source_degree
         self._regions: dict[int, tuple[int, Region]] = {}
-        # (source, target) -> (source's star version, target's, Flips | None, CollapsePlan | None)
+        # (source, target) -> _plan_entry
         self._plans: dict[tuple[int, int], tuple] = {}
 
     def forget(self, v: int) -> None:
@@ -164,19 +164,25 @@ class StencilCache:
         Its flips depend on the source's star alone: a change of the
         target's star only asks for the link condition again.
         """
+        return self._plan_entry(source, target)[3]
+
+    def _plan_entry(self, source: int, target: int) -> tuple:
+        """``(source's star version, target's, Flips | None, CollapsePlan |
+        None, (T, 3) int64 new triangles | None)`` of a half-edge, current."""
         key = (source, target)
         sv = self.log.star_version
         s_stamp, t_stamp = sv[source], sv[target]
         hit = self._plans.get(key)
         if hit is not None and hit[0] == s_stamp:
             if hit[1] == t_stamp:
-                return hit[3]
+                return hit
             flips = hit[2]
         else:
             flips = plan_flips(self.plan.tri, source, target)
         plan = None if flips is None else plan_from_flips(self.plan.tri, source, target, flips)
-        self._plans[key] = (s_stamp, t_stamp, flips, plan)
-        return plan
+        tris = None if plan is None else np.asarray(plan.new_triangles, np.int64)
+        entry = self._plans[key] = (s_stamp, t_stamp, flips, plan, tris)
+        return entry
 
     def region(self, v: int) -> Region:
         """The :class:`Region` of ``v``, cached until a change touches it."""
@@ -240,9 +246,9 @@ class StencilCache:
                 allowed = set(targets[v])
                 wanted = [w for w in region.ring if w in allowed]
             for w in wanted:
-                plan = self.collapse_plan(v, w)
-                if plan is not None:
-                    jobs.append(Job(plan, np.asarray(plan.new_triangles, np.int64), region, None, None))
+                entry = self._plan_entry(v, w)
+                if entry[3] is not None:
+                    jobs.append(Job(entry[3], entry[4], region, None, None))
         return jobs
 
     def move_jobs(self, moves):
