@@ -328,6 +328,43 @@ def locate_on_host(batch: HostBatch, jobs: np.ndarray, points: np.ndarray, point
     batch.row_locate[rows] = False
 
 
+def keep_located(batch: HostBatch, jobs: np.ndarray, located: np.ndarray) -> None:
+    """Takes the kernel's locations of the rows of ``jobs`` it located.
+
+    The kernel locates a row only where its filter is sure, so those are
+    the exact perturbed locations: only the other rows of ``jobs`` are left
+    for :func:`locate_on_host`. Sets their ``row_cand`` and ``row_tri`` and
+    clears ``row_locate``.
+
+    Args:
+      batch: the batch the kernel scored.
+      jobs: ``(k,)`` job indices.
+      located: ``(R,)`` the kernel's flat triangle of each row (``-1``: not located).
+    """
+    in_job = np.zeros(len(batch.row_start) - 1, bool)
+    in_job[jobs] = True
+    rows = np.flatnonzero(batch.row_locate & in_job[batch.row_job] & (located >= 0))
+    found = located[rows]
+    batch.row_cand[rows] = batch.tri_edges[found]
+    batch.row_tri[rows] = found - batch.tri_start[batch.row_job[rows]]
+    batch.row_locate[rows] = False
+
+
+def located_jobs(batch: HostBatch, jobs: np.ndarray) -> HostBatch:
+    """The jobs ``jobs`` of ``batch``, every row of them located
+    (:func:`keep_located`, :func:`locate_on_host`), as a batch of their own.
+
+    A job's scores do not depend on the other jobs of its batch, so scoring
+    these again alone gives what scoring the whole batch again would.
+    """
+    cands = []
+    for j in jobs.tolist():
+        c = batch.cands[j]
+        rs = slice(batch.row_start[j], batch.row_start[j + 1])
+        cands.append(c._replace(cand=batch.row_cand[rs] - batch.edge_start[j], triangle_of_point=batch.row_tri[rs]))
+    return batch_of_located(cands)
+
+
 def packed_batches(jobs, plan, budget: int = scoring.ROW_BUDGET):
     """The jobs as batches packed into few capacities
     (:func:`~otjax.batch.packing.choose_packing`), left for the kernel to

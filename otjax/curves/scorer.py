@@ -13,7 +13,7 @@ import numpy as np
 
 from otjax.batch.pipeline import Handle, KernelPipeline, pipelined
 from otjax.curves import scoring
-from otjax.curves.export import HostBatch, cut_outputs, locate_on_host, read_costs
+from otjax.curves.export import HostBatch, cut_outputs, keep_located, locate_on_host, located_jobs, read_costs
 from otjax.curves.stencils import CandidateCost
 
 
@@ -64,17 +64,29 @@ class Scorer:
 
         Jobs with a row the kernel could not locate (its filter unsure:
         points on or within rounding of an edge, frequent on exactly
-        collinear input) are located on the host and scored again.
+        collinear input) keep the rows it located, have the others located
+        on the host, and are scored again in a batch of their own.
         """
         if handle is None:
             return np.zeros(0), []
         outputs = self._wait(batch, handle)
         bad = np.flatnonzero(outputs.unresolved)
-        if len(bad):
-            locate_on_host(batch, bad, self.points, self.point_rows)
-            self.note(batch)
-            outputs = self._wait(batch, self.dispatch(batch))
-        return read_costs(batch, outputs)
+        if not len(bad):
+            return read_costs(batch, outputs)
+        # The kernel costs an unlocated row on the edges of flat triangle 0
+        # (a placeholder): their job is scored again too.
+        if len(batch.tri_edges):
+            bad = np.union1d(bad, batch.edge_job[batch.tri_edges[0]])
+        keep_located(batch, bad, outputs.located)
+        locate_on_host(batch, bad, self.points, self.point_rows)
+        self.note(batch)
+        again = located_jobs(batch, bad)
+        delta, costs = read_costs(batch, outputs)
+        delta_again, costs_again = read_costs(again, self._wait(again, self.dispatch(again)))
+        delta[bad] = delta_again
+        for j, c in zip(bad.tolist(), costs_again):
+            costs[j] = c
+        return delta, costs
 
     def score_batches(self, batches) -> tuple[list, np.ndarray, list[CandidateCost]]:
         """Scores an iterable of batches, each dispatched before the last
