@@ -48,6 +48,7 @@ class MemberSolution(NamedTuple):
       cost: float. ``sum_ij x_ij C_ij``.
       status: int. A status code of :mod:`otjax.lp.problem`.
       iterations: int. HiGHS's iterations.
+      closed_form: bool. Solved without HiGHS (see the module docstring).
     """
 
     plan: np.ndarray
@@ -56,6 +57,7 @@ class MemberSolution(NamedTuple):
     cost: float
     status: int
     iterations: int = 0
+    closed_form: bool = False
 
 
 def constraints(lp: LocalLP) -> tuple[scipy.sparse.csr_matrix, np.ndarray]:
@@ -117,13 +119,13 @@ def solve_member(lp: LocalLP, time_limit: float | None = None) -> MemberSolution
     cost = np.asarray(lp.cost, np.float64)
     free = unconstrained_bins(lp)
     plan = _closed_form(cost, np.asarray(lp.mass, np.float64), free)
-    iterations = 0
-    if plan is None:
+    closed, iterations = plan is not None, 0
+    if not closed:
         status, plan, iterations = _highs(lp, cost, free, time_limit)
         if status != CONVERGED:
             return MemberSolution(np.zeros((p, k)), np.zeros(s), np.zeros(s), 0.0, status, iterations)
     mass, density = simplex_totals(plan, lp, s)
-    return MemberSolution(plan, density, mass, float(np.sum(plan * cost)), CONVERGED, iterations)
+    return MemberSolution(plan, density, mass, float(np.sum(plan * cost)), CONVERGED, iterations, closed)
 
 
 def unconstrained_bins(lp: LocalLP) -> np.ndarray:

@@ -111,7 +111,7 @@ def bin_counts(areas: np.ndarray, diagonal: float, density: float = DEFAULT_DENS
 def facet_bins(vertices: np.ndarray, triangles: np.ndarray, density: float = DEFAULT_DENSITY,
                min_bins: int = DEFAULT_MIN_BINS, max_bins: int = DEFAULT_MAX_BINS,
                diagonal: float | None = None, seed: int = 0,
-               max_stretch: float = DEFAULT_MAX_STRETCH) -> FacetBins:
+               max_stretch: float = DEFAULT_MAX_STRETCH, bin_length: float | None = None) -> FacetBins:
     """CVT bins of every triangle (§3.1), deterministic for a given ``seed``.
 
     Args:
@@ -124,6 +124,10 @@ def facet_bins(vertices: np.ndarray, triangles: np.ndarray, density: float = DEF
         do not change as the complex changes.
       seed: seeds the template CVTs (the only random step).
       max_stretch: facets whose template map stretches more get their own CVT.
+      bin_length: if given, a facet also gets at least ``longest edge /
+        (bin_length * diagonal)`` bins (rounded up; still at most
+        ``max_bins``), so a long thin facet, small in area, does not have
+        its measure summed up by one or two bins.
 
     Returns:
       :class:`FacetBins`.
@@ -140,6 +144,12 @@ def facet_bins(vertices: np.ndarray, triangles: np.ndarray, density: float = DEF
         diagonal = float(np.linalg.norm(np.ptp(vertices, axis=0))) if len(vertices) else 0.0
     corners = local_frames(vertices, triangles)
     count = bin_counts(_area2d(corners), diagonal, density, min_bins, max_bins)
+    if bin_length is not None:
+        if not bin_length > 0:
+            raise ValueError(f"bin_length must be > 0, got {bin_length}")
+        longest = np.max(np.linalg.norm(corners - np.roll(corners, 1, axis=1), axis=2), axis=1)
+        by_length = np.ceil(longest / (bin_length * diagonal) - 1e-9).astype(np.int64)
+        count = np.maximum(count, np.minimum(by_length, max_bins))
     start = np.cumsum(count) - count
     total = int(count.sum())
     bary = np.empty((total, 3))

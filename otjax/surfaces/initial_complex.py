@@ -12,11 +12,13 @@ a kept facet stay as isolated vertices (the paper's garbage collectors).
 
 from __future__ import annotations
 
+import time
 from typing import NamedTuple
 
 import numpy as np
 import scipy.spatial
 
+from otjax.surfaces.bins import DEFAULT_DENSITY
 from otjax.surfaces.complex import SimplicialComplex, Triangle
 from otjax.surfaces.plan import BinSettings, SurfacePlan
 from otjax.surfaces.relaxation import RelaxationStats, Solver, relax
@@ -26,6 +28,20 @@ from otjax.surfaces.relaxation import RelaxationStats, Solver, relax
 FRACTION = 0.15
 #: The box corners stand this far (in bbox diagonals) outside the input's box.
 BOX_MARGIN = 0.25
+#: Fewest bins on a facet in the initial relaxation (docs/decisions.md#initial_bins).
+MIN_BINS = 1
+#: ... and at least one bin per this length (in bbox diagonals) of its longest
+#: edge. One bin puts the whole measure of a long sliver at its centroid,
+#: a cheap place to send points beyond an open boundary; every facet that
+#: reaches a box corner has an edge longer than the margin, so it gets two
+#: bins at least, while facets along the surface keep one.
+BIN_LENGTH = 0.25
+#: Stretched Delaunay facets keep their mapped template bins (exact
+#: capacities and centroids, cells not quite centroidal) instead of their own
+#: Lloyd iterations, which cost most of the time of the bins; they are the
+#: large facets across the volume that the filter drops
+#: (docs/decisions.md#initial_bins).
+MAX_STRETCH = float("inf")
 _FACES = np.array([[0, 1, 2], [0, 1, 3], [0, 2, 3], [1, 2, 3]])
 
 
@@ -39,12 +55,15 @@ class InitialComplex(NamedTuple):
       delaunay_facets: facets of the tetrahedralisation (box corners excluded
         or not, all of them).
       relaxation: the :class:`RelaxationStats` of the relaxation.
+      seconds: wall time of each step: ``delaunay``, ``bins`` (the plan on
+        every Delaunay facet), ``relaxation``, ``filter``.
     """
 
     plan: SurfacePlan
     vertex_points: np.ndarray
     delaunay_facets: int
     relaxation: RelaxationStats
+    seconds: dict
 
 
 def sample_subset(n_points: int, fraction: float, seed: int) -> np.ndarray:
@@ -115,17 +134,37 @@ def initial_complex(points: np.ndarray, masses: np.ndarray, solve: Solver, *, fr
     """
     points = np.asarray(points, np.float64)
     masses = np.asarray(masses, np.float64)
+    clock = [time.perf_counter()]
+    seconds = {}
+
+    def lap(name):
+        clock.append(time.perf_counter())
+        seconds[name] = clock[-1] - clock[-2]
+
     subset = sample_subset(len(points), fraction, seed)
     vertices = np.vstack([points[subset], box_corners(points)])
     tets = tetrahedra(vertices)
     facets = tetrahedra_facets(tets)
+    lap("delaunay")
     if settings is None:
-        settings = BinSettings(diagonal=float(np.linalg.norm(np.ptp(points, axis=0))), seed=seed)
+        settings = initial_settings(points, seed)
     full = SimplicialComplex(vertices, facets)
     plan = SurfacePlan(full, points, masses, settings)
+    lap("bins")
     stats = relax(plan, solve, two_tetrahedra_rule(tets), tolerance=tolerance, max_sweeps=max_sweeps, seed=seed)
+    lap("relaxation")
     kept = _kept(plan, vertices, subset)
-    return InitialComplex(kept[0], kept[1], len(facets), stats)
+    lap("filter")
+    return InitialComplex(kept[0], kept[1], len(facets), stats, seconds)
+
+
+def initial_settings(points: np.ndarray, seed: int = 0) -> BinSettings:
+    """The bin settings of the initial relaxation: the input's diagonal, the
+    default density, at least :data:`MIN_BINS` bins on a facet and one per
+    :data:`BIN_LENGTH` of its longest edge, and every facet's bins mapped from
+    the template (:data:`MAX_STRETCH`)."""
+    return BinSettings(diagonal=float(np.linalg.norm(np.ptp(points, axis=0))), min_bins=MIN_BINS, seed=seed,
+                       max_stretch=MAX_STRETCH, bin_length=BIN_LENGTH)
 
 
 def _kept(plan: SurfacePlan, vertices: np.ndarray, subset: np.ndarray) -> tuple[SurfacePlan, np.ndarray]:

@@ -22,7 +22,8 @@ import scipy.sparse
 import scipy.spatial
 
 from otjax.lp.problem import LocalLP
-from otjax.surfaces.bins import DEFAULT_DENSITY, DEFAULT_MAX_BINS, DEFAULT_MIN_BINS, facet_bins
+from otjax.surfaces.bins import (DEFAULT_DENSITY, DEFAULT_MAX_BINS, DEFAULT_MAX_STRETCH, DEFAULT_MIN_BINS,
+                               facet_bins)
 from otjax.surfaces.complex import SimplicialComplex, Triangle, triangle_key
 
 #: Plan entries below this fraction of their point's mass on a stencil are
@@ -63,6 +64,8 @@ class BinSettings(NamedTuple):
     min_bins: int = DEFAULT_MIN_BINS
     max_bins: int = DEFAULT_MAX_BINS
     seed: int = 0
+    max_stretch: float = DEFAULT_MAX_STRETCH
+    bin_length: float | None = None
 
 
 class Stencil(NamedTuple):
@@ -135,7 +138,8 @@ class SurfacePlan:
             return
         s = self.settings
         made = facet_bins(self.complex.positions, np.array(todo, np.int64), density=s.density,
-                          min_bins=s.min_bins, max_bins=s.max_bins, diagonal=s.diagonal, seed=s.seed)
+                          min_bins=s.min_bins, max_bins=s.max_bins, diagonal=s.diagonal, seed=s.seed,
+                          max_stretch=s.max_stretch, bin_length=s.bin_length)
         stops = np.cumsum(made.count)
         for t, stop, n in zip(todo, stops.tolist(), made.count.tolist()):
             self.bins[t] = Bins(made.barycentric[stop - n:stop], made.capacity[stop - n:stop])

@@ -29,6 +29,7 @@ class LocalSolver:
     Attributes:
       solved: problems solved so far.
       exact_resolves: of those, re-solved by HiGHS after the batched solver.
+      closed_form: of those (``"exact"``), solved in closed form without HiGHS.
     """
 
     def __init__(self, method: str = "exact", options: NewtonOptions = NewtonOptions(), dtype=np.float64):
@@ -37,12 +38,15 @@ class LocalSolver:
         self.dtype = dtype
         self.solved = 0
         self.exact_resolves = 0
+        self.closed_form = 0
 
     def __call__(self, problems: Sequence[LocalLP]) -> list[LocalSolution]:
         if self.method == "exact":
             # One member at a time either way: no padding into a batch and out again.
+            solutions = [solve_member(lp) for lp in problems]
             self.solved += len(problems)
-            return [LocalSolution(s.plan, s.cost, s.status) for s in map(solve_member, problems)]
+            self.closed_form += sum(s.closed_form for s in solutions)
+            return [LocalSolution(s.plan, s.cost, s.status) for s in solutions]
         result = solve_members(problems, self.method, self.options, self.dtype)
         self.solved += len(problems)
         self.exact_resolves += result.exact_resolves
