@@ -199,10 +199,8 @@ def _rows(jobs: list[Job], ucode: np.ndarray, edge_start: np.ndarray, nv: int) -
     if n_out.sum():
         out_job, k = ragged_index(n_out)
         out_rows = row_start[out_job] + n_in[out_job] + k
-        ring_arr = [np.asarray(job.region.ring, np.int64) for job in jobs]
-        a = np.concatenate([r[job.region.outside_link] for r, job in zip(ring_arr, jobs)])
-        b = np.concatenate([r[(job.region.outside_link + 1) % len(r)] for r, job in zip(ring_arr, jobs)])
-        lk = (out_job * nv + np.minimum(a, b)) * nv + np.maximum(a, b)
+        # The (job, a, b) code of _local_edges: job * V^2 + the region's link key.
+        lk = out_job * (nv * nv) + np.concatenate([job.region.outside_key for job in jobs])
         row_cand[out_rows] = np.searchsorted(ucode, lk)[:, None]
         row_locate[out_rows] = False
     for j, job in enumerate(jobs):

@@ -266,7 +266,7 @@ class LinkUpdates:
         take = ~fixed | affected[np.maximum(fixed_edge, 0)]
         take_out = affected[rec.link_edge][region.outside_link]
         sub = Region(region.ring, region.star, inside[take], region.outside[take_out],
-                     region.outside_link[take_out], region.before)
+                     region.outside_link[take_out], region.before, region.outside_key[take_out])
         return Job(plan, tris, sub, None, fixed_edge[take]), Partial(rec, affected, changed_tri, inside, pos,
                                                                       fixed, take)
 

@@ -36,6 +36,8 @@ class Region(NamedTuple):
       outside_link: ``(Q,)`` the link edge ``k`` (``(ring[k], ring[k+1])``) of
         each point of ``outside``.
       before: cost of every edge of the star (spokes and link).
+      outside_key: ``(Q,)`` int64 code ``min * V + max`` of the link edge of
+        each point of ``outside`` (``V`` vertices in the triangulation).
     """
 
     ring: tuple[int, ...]
@@ -44,6 +46,7 @@ class Region(NamedTuple):
     outside: np.ndarray
     outside_link: np.ndarray
     before: float
+    outside_key: np.ndarray
 
 
 class Job(NamedTuple):
@@ -214,7 +217,8 @@ class StencilCache:
         lo, hi = np.minimum(r, nxt), np.maximum(r, nxt)
         e = np.take(plan.pt_edge, ids, axis=0)
         keep = (e[:, 0] == lo[link]) & (e[:, 1] == hi[link])
-        region = Region(ring, star, inside, ids[keep], link[keep], before)
+        link = link[keep]
+        region = Region(ring, star, inside, ids[keep], link, before, (lo * len(tri.xy) + hi)[link])
         self._regions[v] = (version, region)
         return region
 
