@@ -131,7 +131,7 @@ def relax(plan: SurfacePlan, solve: Solver, stencil_of: StencilRule | None = Non
     rule = stencil_of or facet_ring(plan.complex)
     centres = sorted(plan.complex.triangles) if centres is None else list(centres)
     simplices = [rule(c) for c in centres]
-    index = _StencilIndex(plan, simplices)
+    index = StencilIndex(plan, simplices)
     rng = np.random.default_rng(seed)
     total = plan.total_cost()
     costs = [total]
@@ -180,7 +180,7 @@ def _lower_bound(lp: LocalLP) -> float:
     return float(np.dot(lp.mass, lp.cost.min(axis=1)))
 
 
-class _StencilIndex:
+class StencilIndex:
     """The simplices of every stencil as integer ids (vertex ``v`` is ``v``,
     facet ``f`` of the sorted stencil facets is ``V + f``), every bin's
     position with its simplex, and the test of which stencils may improve.

@@ -122,3 +122,42 @@ def test_padded_batch_matches_members(rng):
     assert only_second.status.tolist() == [FAILED, CONVERGED] and np.all(only_second.plan[0] == 0)
     kept = solve_exact(batch, members=[0], into=only_second)
     np.testing.assert_allclose(kept.cost, sol.cost, atol=1e-12)
+
+
+def _linprog_cost(lp):
+    """The optimum by scipy's own HiGHS interface on the documented constraints:
+    an oracle that shares neither the matrix built for highspy nor the closed form."""
+    import scipy.optimize
+
+    a_eq, b_eq = constraints(lp)
+    c = np.concatenate([lp.cost.ravel(), np.zeros(lp.n_simplices)])
+    res = scipy.optimize.linprog(c, A_eq=a_eq, b_eq=b_eq, bounds=(0, None), method="highs")
+    assert res.status == 0
+    return res.fun
+
+
+def test_optimum_matches_an_independent_linprog_with_and_without_the_closed_form():
+    from tests.lp.stencils import random_stencil
+
+    rng = np.random.default_rng(5)
+    closed = 0
+    for trial in range(40):
+        n_facets = int(rng.integers(1, 5))
+        # Every facet with one bin (closed form possible) in half the trials.
+        n_bins = n_facets + 2 if trial % 2 else int(rng.integers(n_facets + 2, 30))
+        lp = random_stencil(rng, int(rng.integers(3, 40)), n_bins, n_facets, 2, noise=0.2)
+        sol = solve_member(lp)
+        assert sol.status == CONVERGED
+        assert sol.cost == pytest.approx(_linprog_cost(lp), rel=1e-7, abs=1e-10)
+        np.testing.assert_allclose(sol.plan.sum(axis=1), lp.mass, rtol=1e-9)
+        closed += sol.closed_form
+    assert 5 <= closed <= 35
+
+
+def test_the_closed_form_is_refused_when_a_cheapest_bin_is_tied_by_uniformity():
+    # One point sits on a facet bin of a two-bin facet: sending it there alone
+    # would break uniformity, so the closed form must not be taken.
+    lp = facet_and_vertex([[0.0, 0.0, 0.0]], [1.0], vertex_at=[0.0, 0.0, 0.3])
+    sol = solve_member(lp)
+    assert not sol.closed_form
+    assert sol.cost == pytest.approx(_linprog_cost(lp), abs=1e-10)

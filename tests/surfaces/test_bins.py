@@ -190,3 +190,18 @@ def test_local_frames_keep_lengths(rng):
 def test_no_facets_give_no_bins():
     b = facet_bins(np.random.default_rng(0).random((4, 3)), np.zeros((0, 3), np.int64))
     assert [x.shape for x in b] == [(0,), (0, 3), (0,), (0,)]
+
+
+def test_bin_length_gives_a_long_sliver_one_bin_per_length_and_leaves_small_facets():
+    v = np.array([[0.0, 0, 0], [0.02, 0, 0], [0.01, 0.9, 0], [0.05, 0.05, 0], [0.0, 0.05, 0]])
+    tris = np.array([[0, 1, 2], [0, 3, 4]])
+    plain = facet_bins(v, tris, min_bins=1, diagonal=1.0)
+    assert plain.count.tolist() == [1, 1]  # both small in area
+    long = facet_bins(v, tris, min_bins=1, diagonal=1.0, bin_length=0.25)
+    # the sliver's longest edge is just over 0.9: ceil(0.9 / 0.25) = 4 bins
+    assert long.count.tolist() == [4, 1]
+    np.testing.assert_allclose(np.bincount(long.facet, long.capacity), 1.0)
+    pos = bin_positions(v, tris, long)[:4]
+    assert np.ptp(pos[:, 1]) > 0.4  # spread along the sliver, not bunched at its centroid
+    with pytest.raises(ValueError, match="bin_length"):
+        facet_bins(v, tris, bin_length=0.0)

@@ -7,6 +7,7 @@ from scipy.spatial import cKDTree
 from otjax.surfaces.initial_complex import (box_corners, initial_complex, sample_subset, tetrahedra,
                                             tetrahedra_facets, two_tetrahedra_rule)
 from otjax.surfaces.solvers import exact_solver
+from tests.surfaces.shapes import CROSS, CUBE, SQUARE, diagonal, fit, point_triangle_distance
 
 
 def crossing_planes(n, rng):
@@ -95,3 +96,45 @@ def test_crossing_planes_are_both_covered_by_facets_near_them(cross):
     near = cKDTree(facet_samples(arrays.vertices, arrays.triangles)).query(pts)[0]
     for plane in (np.abs(pts[:, 2] - 0.5) < 1e-12, np.abs(pts[:, 1] - 0.5) < 1e-12):
         assert np.mean(near[plane] < 0.02 * d) > 0.5
+
+
+# Acceptance on noise-free shapes (tests/surfaces/shapes.py measures exact
+# distances to the true surface, in units of the bbox diagonal D).
+def built(shape, n, seed):
+    pts = shape.sample(n, np.random.default_rng(seed))
+    ic = initial_complex(pts, np.ones(n), exact_solver, seed=seed)
+    arrays = ic.plan.complex.to_arrays()
+    return pts, ic, arrays.vertices, arrays.triangles, diagonal(pts)
+
+
+def test_a_cube_surface_is_covered_by_facets_within_one_percent():
+    pts, ic, v, t, d = built(CUBE, 5000, seed=2)
+    f = fit(CUBE, v, t, d, within=0.01, samples=4000, seed=2)
+    assert f.coverage >= 0.95
+    assert f.chamfer <= 0.01
+    # kept facets are the surface's: far fewer than the tetrahedralisation's
+    assert len(t) < 0.25 * ic.delaunay_facets
+    np.testing.assert_allclose(ic.plan.point_mass(), 1.0, rtol=1e-12)
+
+
+def test_an_open_square_keeps_its_boundary_and_covers_its_inside():
+    pts, ic, v, t, d = built(SQUARE, 1500, seed=4)
+    f = fit(SQUARE, v, t, d, within=0.01, samples=4000, seed=4)
+    # no facet leaves the square (off its plane or past its edges) by 1% D
+    assert f.to_surface <= 0.01
+    truth = SQUARE.sample(4000, np.random.default_rng(5))
+    near = point_triangle_distance(truth, v[t]) / d <= 0.01
+    inside = np.min(np.c_[truth[:, :2], 1 - truth[:, :2]], axis=1) > 0.05
+    # only a band along the edge, outside the subset's hull, may be bare
+    assert np.mean(near[inside]) >= 0.98 and np.mean(near) >= 0.9
+
+
+def test_two_crossing_planes_are_both_covered():
+    pts, ic, v, t, d = built(CROSS, 2000, seed=6)
+    truth = CROSS.sample(4000, np.random.default_rng(7))
+    dist = point_triangle_distance(truth, v[t]) / d
+    on_z = np.abs(truth[:, 2] - 0.5) < 1e-12
+    for plane in (on_z, ~on_z):
+        assert np.mean(dist[plane] <= 0.01) >= 0.9
+        assert np.mean(dist[plane] <= 0.02) >= 0.95
+    assert fit(CROSS, v, t, d, samples=2000, seed=6).chamfer <= 0.01

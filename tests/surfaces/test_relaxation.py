@@ -6,8 +6,11 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from otjax.lp.exact import solve_member
+from otjax.surfaces.complex import SimplicialComplex
+from otjax.surfaces.initial_complex import (box_corners, initial_settings, sample_subset, tetrahedra,
+                                            tetrahedra_facets, two_tetrahedra_rule)
 from otjax.surfaces.plan import BinSettings, SurfacePlan
-from otjax.surfaces.relaxation import LocalSolution, relax, rounds_of
+from otjax.surfaces.relaxation import LocalSolution, StencilIndex, facet_ring, relax, rounds_of
 from tests.surfaces.test_transport_plan import grid_complex
 
 
@@ -90,3 +93,29 @@ def test_rounds_are_vertex_disjoint_first_fit_partitions(stencils):
     for i, k in where.items():
         for earlier in range(k):
             assert any(set(stencils[i]) & set(stencils[j]) for j in rounds[earlier] if j < i)
+
+
+@pytest.mark.parametrize("sweeps", [1, 2])
+def test_stencils_ruled_out_before_a_sweep_cannot_lower_the_cost(sweeps):
+    # The initial complex's setting: a Delaunay of a subset, two-tetrahedra stencils.
+    rng = np.random.default_rng(11)
+    pts = np.c_[rng.random((300, 2)), 0.5 + rng.normal(0, 0.003, 300)]
+    subset = sample_subset(len(pts), 0.15, 1)
+    vertices = np.vstack([pts[subset], box_corners(pts)])
+    tets = tetrahedra(vertices)
+    facets = tetrahedra_facets(tets)
+    plan = SurfacePlan(SimplicialComplex(vertices, facets), pts, np.ones(len(pts)), initial_settings(pts))
+    rule = two_tetrahedra_rule(tets)
+    relax(plan, exact, rule, max_sweeps=sweeps)
+    simplices = [rule(tuple(t)) for t in facets.tolist()]
+    live = StencilIndex(plan, simplices).improvable(plan)
+    gains = []
+    for (vs, fs), flagged in zip(simplices, live):
+        s = plan.stencil(vs, fs)
+        optimum = solve_member(s.lp).cost if len(s.points) else 0.0
+        if not flagged:
+            assert optimum >= s.cost * (1 - 1e-9) - 1e-12
+        gains.append(s.cost - optimum)
+    # after a sweep the test rules stencils out; the kept ones include every one that gains
+    assert live.sum() < 0.8 * len(live)
+    assert max(g for g, f in zip(gains, live) if f) > 0
