@@ -25,7 +25,7 @@ import numpy as np
 
 from otjax.batch.pipeline import pipelined
 from otjax.curves import scoring
-from otjax.curves.export import HostBatch, export_jobs, located_batches, packed_batches
+from otjax.curves.export import HostBatch, Stencils, export_jobs, located_batches, packed_batches
 from otjax.curves.plan import Change, TransportPlan
 from otjax.curves.relocation import optimal_position
 from otjax.curves.rescoring import ChangeLog, LinkUpdates
@@ -89,7 +89,7 @@ class CurveEngine:
         self.update_min_rows = update_min_rows
         self.counts = {"scored": 0, "updated": 0, "partial": 0}
         self.seconds = {"export": 0.0, "score": 0.0}
-        # {source: {target: (Scored, version, call)}}: the stencils of the latest
+        # {source: {target: (stencils, costs, index, plan, version, call)}}: the stencils of the latest
         # scoring calls, by call in _hot_calls ({call: (rows, keys)}, oldest first).
         self._hot: dict[int, dict] = {}
         self._hot_calls: OrderedDict = OrderedDict()
@@ -197,36 +197,42 @@ class CurveEngine:
         self.seconds["score"] += time.perf_counter() - t0
         return handle
 
-    def _collect(self, batch: HostBatch, handle) -> list[CandidateCost]:
+    def _collect(self, batch: HostBatch, handle) -> tuple[np.ndarray, list[CandidateCost]]:
         t0 = time.perf_counter()
-        _delta, costs = self.scorer.collect(batch, handle)
+        delta, costs = self.scorer.collect(batch, handle)
         self.seconds["score"] += time.perf_counter() - t0
         self.counts["scored"] += len(costs)
-        return costs
+        return delta, costs
 
     def _settle(self, batch, handle, entered: list, veto, keep: bool, tracking: bool) -> None:
         """Reads a dispatched batch into ``entered`` (and records, hot stencils)."""
         kept: list = []
         call = self._calls = self._calls + 1
-        for c, r in zip(batch.cands, self._collect(batch, handle)):
-            key = (c.plan.source, c.plan.target)
+        deltas, costs = self._collect(batch, handle)
+        cands, version = batch.cands, self.log.version
+        rows = np.diff(batch.row_start).tolist()
+        plan_of = cands.plan if isinstance(cands, Stencils) else (lambda j: cands[j].plan)
+        # Stencils and costs are made only where read: most are never taken.
+        for j, (d, n) in enumerate(zip(deltas.tolist(), rows)):
+            plan = plan_of(j)
+            key = (plan.source, plan.target)
             part = self._partial.pop(key, None)
             if part is not None:  # scored in part: not a whole stencil, never kept
-                rec, delta = self.links.finish_partial(part, c, r)
+                rec, delta = self.links.finish_partial(part, cands[j], costs[j])
                 self._records.setdefault(key[0], {})[key[1]] = rec
                 entered.append((key, delta))
                 self.counts["partial"] += 1
                 continue
-            if veto is not None and not veto(c, r):
+            if veto is not None and not veto(cands[j], costs[j]):
                 continue
-            delta = r.delta
-            if tracking and len(c.point_ids) >= self.update_min_rows:
-                rec = self.links.record(c, r)
+            delta = d
+            if tracking and n >= self.update_min_rows:
+                rec = self.links.record(cands[j], costs[j])
                 self._records.setdefault(key[0], {})[key[1]] = rec
-                delta = rec.delta(c.before)
+                delta = rec.delta(float(batch.before[j]))
             entered.append((key, delta))
             if keep:
-                self._hot.setdefault(key[0], {})[key[1]] = (Scored(c, r), self.log.version[key[0]], call)
+                self._hot.setdefault(key[0], {})[key[1]] = (cands, costs, j, plan, version[key[0]], call)
                 kept.append(key)
         if kept:
             self._keep_hot(call, len(batch.row_point), kept)
@@ -241,7 +247,7 @@ class CurveEngine:
             self._hot_rows -= n
             for s, t in old_keys:
                 targets = self._hot.get(s)
-                if targets is not None and t in targets and targets[t][2] == old:
+                if targets is not None and t in targets and targets[t][5] == old:
                     del targets[t]
 
     def _split(self, sources):
@@ -278,9 +284,9 @@ class CurveEngine:
         for key in keys:
             h = self._hot.get(key[0], {}).pop(key[1], None)
             # The plan too: a change of the target's star alone can change it.
-            if (h is not None and h[1] == version[key[0]]
-                    and self.stencils.collapse_plan(*key) == h[0].candidate.plan):
-                out[key] = h[0]
+            if h is not None and h[4] == version[key[0]] and self.stencils.collapse_plan(*key) == h[3]:
+                cands, costs, j = h[:3]
+                out[key] = Scored(cands[j], costs[j])
             else:
                 again.setdefault(key[0], []).append(key[1])
             self._records.pop(key[0], None)
@@ -289,7 +295,7 @@ class CurveEngine:
             batch = self.export(sorted(again), again)
             self.seconds["export"] += time.perf_counter() - t0
             handle = self._dispatch(batch)
-            for c, r in zip(batch.cands, self._collect(batch, handle)):
+            for c, r in zip(batch.cands, self._collect(batch, handle)[1]):
                 out[(c.plan.source, c.plan.target)] = Scored(c, r)
         return [out[key] for key in keys]
 
@@ -347,7 +353,7 @@ class CurveEngine:
         order; half-edges that cannot be collapsed are left out."""
         batch = export_jobs(self.stencils.collapse_jobs(sources, targets), self.plan, on_host=True)
         self.scorer.note(batch)
-        return batch.cands
+        return list(batch.cands)
 
     def candidate(self, source: int, target: int) -> CandidateStencil | None:
         """The stencil of collapsing ``source`` onto ``target``, or ``None``."""
@@ -358,7 +364,7 @@ class CurveEngine:
         """Located stencils of the ``(v, position)`` moves that keep the embedding."""
         batch = export_jobs(list(self.stencils.move_jobs(moves)), self.plan, on_host=True)
         self.scorer.note(batch)
-        return batch.cands
+        return list(batch.cands)
 
     def relocation_candidate(self, v: int, position) -> CandidateStencil | None:
         """The stencil of moving ``v`` to ``position``, or ``None`` if it would fold a triangle."""

@@ -11,6 +11,7 @@ the kernel's outputs back into one :class:`CandidateCost` per job.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import NamedTuple
 
@@ -33,7 +34,9 @@ class HostBatch:
     to end (unpadded, ids of any width), and what reading the results needs.
 
     See :class:`otjax.curves.scoring.FlatBatch` for the fields shared with the
-    kernel; the others: ``cands`` (the :class:`CandidateStencil` of each job),
+    kernel; the others: ``cands`` (the :class:`CandidateStencil` of each job,
+    a sequence that makes each when first read), ``n_inside`` (``(J,)`` or
+    ``None``: read from ``cands``),
     ``row_point`` (``(R,)`` point id of each row), ``row_tri`` (local triangle
     of a row located on the host, else ``-1``), ``row_start``,
     ``edge_start``, ``tri_start`` (``(J + 1,)`` offsets per job), ``before``
@@ -64,6 +67,7 @@ class HostBatch:
     before: np.ndarray
     seq: np.ndarray | None = None
     located_by_kernel: bool = False
+    n_inside: np.ndarray | None = None
 
     @classmethod
     def empty(cls) -> HostBatch:
@@ -238,6 +242,92 @@ def _fans(jobs: list[Job], coords: np.ndarray, tri_start: np.ndarray) -> _Fans:
     return _Fans(fan_job * 8.0 + phi, fan_tri, job_fan, apex, theta, ears, few)
 
 
+class Stencils(Sequence):
+    """The :class:`CandidateStencil` s of an exported batch, each made when
+    first read: a scoring reads a few of them (the winner, large stencils),
+    not all.
+
+    Args:
+      jobs: the batch's jobs.
+      batch: the :class:`HostBatch` exported from them.
+      edge_keys: ``(E, 2)`` the batch's flat edge keys.
+      on_host: whether the batch was located on the host (the stencils then
+        carry their candidate edges and triangles).
+    """
+
+    def __init__(self, jobs: list[Job], batch: HostBatch, edge_keys: np.ndarray, on_host: bool):
+        self.jobs = jobs
+        self.batch = batch
+        self.edge_keys = edge_keys
+        self.on_host = on_host
+        self._made: list = [None] * len(jobs)
+
+    def __len__(self) -> int:
+        return len(self.jobs)
+
+    def plan(self, j: int):
+        """The plan of job ``j`` (without making its stencil)."""
+        return self.jobs[j].plan
+
+    def __getitem__(self, j):
+        if isinstance(j, slice):
+            return [self[i] for i in range(*j.indices(len(self)))]
+        c = self._made[j]
+        if c is None:
+            b, job = self.batch, self.jobs[j]
+            es = slice(b.edge_start[j], b.edge_start[j + 1])
+            rs = slice(b.row_start[j], b.row_start[j + 1])
+            cand = tri = None
+            if self.on_host:
+                cand = b.row_cand[rs] - b.edge_start[j]
+                tri = b.row_tri[rs]
+            c = self._made[j] = CandidateStencil(job.plan, self.edge_keys[es], b.edge_xy[es], b.row_point[rs],
+                                                 int(b.n_inside[j]), float(b.before[j]), job.moved, cand, tri)
+        return c
+
+
+class Costs(Sequence):
+    """The :class:`CandidateCost` s of a scored batch, each made when first
+    read; an entry may be replaced (a job scored again).
+
+    Args:
+      delta: ``(J,)`` cost increase of each job.
+      fields: the six ``(E,)`` per-edge fields of :class:`CandidateCost`.
+      assignment: ``(R,)`` local edge of each row.
+      triangle: ``(R,)`` local new triangle of each row.
+      edge_start, row_start: ``(J + 1,)`` offsets.
+      n_inside: ``(J,)`` rows of each job's changed region.
+    """
+
+    def __init__(self, delta, fields, assignment, triangle, edge_start, row_start, n_inside):
+        self.delta = delta
+        self.fields = fields
+        self.assignment = assignment
+        self.triangle = triangle
+        self.edge_start = edge_start
+        self.row_start = row_start
+        self.n_inside = n_inside
+        self._made: list = [None] * len(delta)
+
+    def __len__(self) -> int:
+        return len(self._made)
+
+    def __getitem__(self, j):
+        if isinstance(j, slice):
+            return [self[i] for i in range(*j.indices(len(self)))]
+        c = self._made[j]
+        if c is None:
+            es = slice(self.edge_start[j], self.edge_start[j + 1])
+            r0 = self.row_start[j]
+            c = self._made[j] = CandidateCost(float(self.delta[j]), *(f[es] for f in self.fields),
+                                              self.assignment[r0:self.row_start[j + 1]],
+                                              self.triangle[r0:r0 + self.n_inside[j]])
+        return c
+
+    def __setitem__(self, j: int, cost: CandidateCost) -> None:
+        self._made[j] = cost
+
+
 def export_jobs(jobs: list[Job], plan, on_host: bool) -> HostBatch:
     """The flat :class:`HostBatch` of ``jobs``.
 
@@ -256,27 +346,17 @@ def export_jobs(jobs: list[Job], plan, on_host: bool) -> HostBatch:
     rows = _rows(jobs, edges.code, edges.start, nv)
     fans = _fans(jobs, coords, tri_start)
     batch = HostBatch(
-        cands=[], row_point=rows.point, row_job=rows.job, row_cand=rows.cand, row_locate=rows.locate,
+        cands=(), row_point=rows.point, row_job=rows.job, row_cand=rows.cand, row_locate=rows.locate,
         row_tri=np.full(len(rows.point), -1, np.int64), row_start=rows.start, edge_start=edges.start,
         tri_start=tri_start, edge_xy=edges.xy, edge_job=edges.job,
         tri_xy=np.ascontiguousarray(coords.reshape(-1, 6).T), tri_edges=edges.of_triangle, fan_key=fans.key,
         fan_tri=fans.tri, job_fan=fans.job_fan, job_apex=fans.apex, job_theta=fans.theta, job_ears=fans.ears,
-        before=np.array([job.region.before for job in jobs]))
+        before=np.array([job.region.before for job in jobs]), n_inside=rows.n_inside)
     if on_host:
         locate_on_host(batch, np.arange(len(jobs)), points, point_rows)
     elif not fans.few_ears.all():
         locate_on_host(batch, np.flatnonzero(~fans.few_ears), points, point_rows)
-    edge_start, row_start = edges.start, rows.start
-    for j, job in enumerate(jobs):
-        es = slice(edge_start[j], edge_start[j + 1])
-        rs = slice(row_start[j], row_start[j + 1])
-        cand = tri = None
-        if on_host:
-            cand = batch.row_cand[rs] - edge_start[j]
-            tri = batch.row_tri[rs]
-        batch.cands.append(CandidateStencil(job.plan, edges.keys[es], edges.xy[es], rows.point[rs],
-                                            int(rows.n_inside[j]),
-                                            float(batch.before[j]), job.moved, cand, tri))
+    batch.cands = Stencils(jobs, batch, edges.keys, on_host)
     return batch
 
 
@@ -413,9 +493,10 @@ def cut_outputs(batch: HostBatch, outputs: scoring.Scores) -> scoring.Scores:
                           outputs.located[:nr], outputs.unresolved[:nj])
 
 
-def read_costs(batch: HostBatch, outputs: scoring.Scores) -> tuple[np.ndarray, list[CandidateCost]]:
+def read_costs(batch: HostBatch, outputs: scoring.Scores) -> tuple[np.ndarray, Costs]:
     """``(delta (J,), costs)``: each job's cost increase and its
-    :class:`CandidateCost`, from the :func:`cut_outputs` of its scoring."""
+    :class:`CandidateCost` (in a :class:`Costs`), from the :func:`cut_outputs`
+    of its scoring."""
     per_edge, assignment, located = outputs.per_edge, outputs.assignment, outputs.located
     delta = outputs.total - batch.before
     # Local numbering: flat edges minus the job's offset, likewise triangles.
@@ -423,11 +504,7 @@ def read_costs(batch: HostBatch, outputs: scoring.Scores) -> tuple[np.ndarray, l
     triangle = np.where(batch.row_locate, located - batch.tri_start[batch.row_job], batch.row_tri)
     fields = [per_edge[:, i] for i in range(6)]
     fields[5] = fields[5] > 0
-    out = []
-    for j, c in enumerate(batch.cands):
-        es = slice(batch.edge_start[j], batch.edge_start[j + 1])
-        r0 = batch.row_start[j]
-        rs = slice(r0, batch.row_start[j + 1])
-        out.append(CandidateCost(float(delta[j]), *(f[es] for f in fields), assignment[rs],
-                                 triangle[r0:r0 + c.n_inside]))
-    return delta, out
+    n_inside = batch.n_inside
+    if n_inside is None:
+        n_inside = np.fromiter((c.n_inside for c in batch.cands), np.int64, len(batch.cands))
+    return delta, Costs(delta, fields, assignment, triangle, batch.edge_start, batch.row_start, n_inside)
