@@ -124,7 +124,7 @@ def initial_complex(points: np.ndarray, masses: np.ndarray, solve: Solver, *, fr
       points, masses: the input (in a normalised frame: see :mod:`otjax.frame`).
       solve: the local LP solver of the relaxation.
       fraction: share of the points that become vertices.
-      settings: bin settings; default: the input's bbox diagonal, default density.
+      settings: bin settings; default :func:`initial_settings`.
       seed: seeds the subset, the bins' templates and the sweep order.
       tolerance, max_sweeps: the relaxation's stop (:func:`relax`).
 
