@@ -6,7 +6,8 @@ planes); for each size the initial complex is built with the exact solver
 
 * the seconds of each step: Delaunay of the subset, the plan with the bins
   of every Delaunay facet, the relaxation, the filter (and their total);
-* the relaxation's sweeps, local LPs solved, how many of those needed HiGHS;
+* the relaxation's sweeps, local LPs solved, how many of those needed HiGHS
+  (in the JSON also the stencils ruled out unbuilt, and built but bounded);
 * the kept facets' fit (``tests/surfaces/shapes.py``): coverage, the share
   of the true surface within 1% (and 2%) of the bbox diagonal ``D`` of a
   kept facet; symmetric Chamfer distance and the largest distance of a kept
@@ -64,6 +65,7 @@ def run(shape_name: str, n: int, seed: int, min_bins: int | None, fraction: floa
            "min_bins": ic.plan.settings.min_bins, "seconds": total, "steps": ic.seconds,
            "delaunay_facets": ic.delaunay_facets, "kept_facets": int(len(arrays.triangles)),
            "sweeps": ic.relaxation.sweeps, "solves": solver.solved, "highs": solver.solved - solver.closed_form,
+           "ruled_out": ic.relaxation.ruled_out, "bounded": ic.relaxation.bounded,
            "cost_first": ic.relaxation.costs[0], "cost_last": ic.relaxation.costs[-1],
            "vertex_mass_share": float(sum(e.mass.sum() for e in ic.plan.vertex_entries.values()) / n)}
     if with_fit:

@@ -55,6 +55,9 @@ class RelaxationStats(NamedTuple):
       rounds: solver calls (rounds of vertex-disjoint stencils).
       unconverged: solutions whose status was not converged (kept only if
         they still lowered the cost: every returned plan is feasible).
+      ruled_out: stencils due for a solve that the search before a sweep
+        found unable to improve (not built).
+      bounded: stencils built but not solved, their bound showing no gain.
     """
 
     costs: tuple[float, ...]
@@ -62,6 +65,8 @@ class RelaxationStats(NamedTuple):
     accepted: int
     rounds: int
     unconverged: int
+    ruled_out: int = 0
+    bounded: int = 0
 
     @property
     def sweeps(self) -> int:
@@ -135,7 +140,7 @@ def relax(plan: SurfacePlan, solve: Solver, stencil_of: StencilRule | None = Non
     rng = np.random.default_rng(seed)
     total = plan.total_cost()
     costs = [total]
-    solves = accepted = n_rounds = unconverged = skipped = 0
+    solves = accepted = n_rounds = unconverged = ruled_out = bounded = 0
     changed_at = np.full(index.n_simplices, -1)
     solved_at = np.full(len(centres), -1)
     clock = 0
@@ -144,6 +149,7 @@ def relax(plan: SurfacePlan, solve: Solver, stencil_of: StencilRule | None = Non
         stale = (solved_at < 0) | (index.last_change(changed_at) > solved_at)
         live = stale & index.improvable(plan)
         solved_at[stale & ~live] = clock
+        ruled_out += int(np.sum(stale & ~live))
         order = [i for i in rng.permutation(len(centres)) if live[i]]
         for members in rounds_of([simplices[i][0] for i in order]):
             clock += 1
@@ -151,7 +157,7 @@ def relax(plan: SurfacePlan, solve: Solver, stencil_of: StencilRule | None = Non
             solved_at[ids] = clock
             cut = [s for s in (plan.stencil(*simplices[i]) for i in ids) if len(s.points)]
             cut = [s for s in cut if _lower_bound(s.lp) < s.cost * (1.0 - GAIN)]
-            skipped += len(members) - len(cut)
+            bounded += len(members) - len(cut)
             if not cut:
                 continue
             solutions = solve([s.lp for s in cut])
@@ -170,7 +176,7 @@ def relax(plan: SurfacePlan, solve: Solver, stencil_of: StencilRule | None = Non
         costs.append(total)
         if previous - total <= tolerance * previous:
             break
-    return RelaxationStats(tuple(costs), solves, accepted, n_rounds, unconverged)
+    return RelaxationStats(tuple(costs), solves, accepted, n_rounds, unconverged, ruled_out, bounded)
 
 
 def _lower_bound(lp: LocalLP) -> float:
