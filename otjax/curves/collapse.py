@@ -193,7 +193,7 @@ class Flips(NamedTuple):
 
     Attributes:
       ring, star: as in :class:`CollapsePlan`.
-      clipped, flipped_out: as in :class:`CollapsePlan`.
+      clipped, flipped_out, fan: as in :class:`CollapsePlan`.
       polygon: the one-ring polygon left once the flips are made (CCW).
     """
 
@@ -202,6 +202,7 @@ class Flips(NamedTuple):
     clipped: tuple[int, ...]
     flipped_out: tuple[tuple[int, int, int], ...]
     polygon: tuple[int, ...]
+    fan: tuple[tuple[int, int, int], ...]
 
 
 def plan_collapse(tri, source: int, target: int) -> CollapsePlan | None:
@@ -263,19 +264,24 @@ def plan_flips(tri, source: int, target: int) -> Flips | None:
         flipped_out.append((poly[chosen - 1], a, poly[(chosen + 1) % n]))
         clipped.append(a)
         del poly[chosen]
-    return Flips(tuple(ring), tuple(star), tuple(clipped), tuple(flipped_out), tuple(poly))
+    n = len(poly)
+    fan = tuple((target, poly[k], poly[(k + 1) % n]) for k in range(n) if target not in (poly[k], poly[(k + 1) % n]))
+    return Flips(tuple(ring), tuple(star), tuple(clipped), tuple(flipped_out), tuple(poly), fan)
 
 
 def plan_from_flips(tri, source: int, target: int, flips: Flips) -> CollapsePlan | None:
     """The :class:`CollapsePlan` of ``flips`` (from :func:`plan_flips` of
     the same half-edge, its source's star unchanged since), or ``None`` if
     the link condition fails after the flips."""
-    poly = flips.polygon
-    if not _link_after_flips(tri, target, poly, flips.flipped_out):
+    if not link_condition(tri, target, flips):
         return None
-    n = len(poly)
-    fan = tuple((target, poly[k], poly[(k + 1) % n]) for k in range(n) if target not in (poly[k], poly[(k + 1) % n]))
-    return CollapsePlan(source, target, flips.ring, flips.star, flips.clipped, flips.flipped_out, fan)
+    return CollapsePlan(source, target, flips.ring, flips.star, flips.clipped, flips.flipped_out, flips.fan)
+
+
+def link_condition(tri, target: int, flips: Flips) -> bool:
+    """The link condition of the collapse of ``flips`` onto ``target``, at
+    the current star of ``target``."""
+    return _link_after_flips(tri, target, flips.polygon, flips.flipped_out)
 
 
 def _link_after_flips(tri, target: int, poly, flipped_out) -> bool:

@@ -19,7 +19,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from otjax.curves.collapse import CollapsePlan, MovePlan, plan_flips, plan_from_flips
+from otjax.curves.collapse import CollapsePlan, MovePlan, link_condition, plan_flips, plan_from_flips
 
 _NO_IDS = np.zeros(0, np.int64)
 
@@ -154,12 +154,14 @@ class StencilCache:
         self.log = log
         self.max_source_degree = max_source_degree
         self._regions: dict[int, tuple[int, Region]] = {}
-        # (source, target) -> _plan_entry
-        self._plans: dict[tuple[int, int], tuple] = {}
+        # {source: {target: _plan_entry}}
+        self._plans: dict[int, dict[int, tuple]] = {}
 
     def forget(self, v: int) -> None:
-        """Drops the region of a removed vertex (memory only: stamps tell stale entries)."""
+        """Drops the region and plans of a removed vertex (memory only:
+        stamps tell stale entries)."""
         self._regions.pop(v, None)
+        self._plans.pop(v, None)
 
     def collapse_plan(self, source: int, target: int) -> CollapsePlan | None:
         """The collapse plan of a half-edge, cached until the star of either end changes.
@@ -172,19 +174,26 @@ class StencilCache:
     def _plan_entry(self, source: int, target: int) -> tuple:
         """``(source's star version, target's, Flips | None, CollapsePlan |
         None, (T, 3) int64 new triangles | None)`` of a half-edge, current."""
-        key = (source, target)
         sv = self.log.star_version
         s_stamp, t_stamp = sv[source], sv[target]
-        hit = self._plans.get(key)
+        plans = self._plans.get(source)
+        if plans is None:
+            plans = self._plans[source] = {}
+        hit = plans.get(target)
+        tri = self.plan.tri
         if hit is not None and hit[0] == s_stamp:
             if hit[1] == t_stamp:
                 return hit
             flips = hit[2]
+            if hit[3] is not None and link_condition(tri, target, flips):
+                # The same plan: keep its object (compared by identity first).
+                entry = plans[target] = (s_stamp, t_stamp, flips, hit[3], hit[4])
+                return entry
         else:
-            flips = plan_flips(self.plan.tri, source, target)
-        plan = None if flips is None else plan_from_flips(self.plan.tri, source, target, flips)
+            flips = plan_flips(tri, source, target)
+        plan = None if flips is None else plan_from_flips(tri, source, target, flips)
         tris = None if plan is None else np.asarray(plan.new_triangles, np.int64)
-        entry = self._plans[key] = (s_stamp, t_stamp, flips, plan, tris)
+        entry = plans[target] = (s_stamp, t_stamp, flips, plan, tris)
         return entry
 
     def region(self, v: int) -> Region:
