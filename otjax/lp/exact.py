@@ -128,6 +128,19 @@ def solve_member(lp: LocalLP, time_limit: float | None = None) -> MemberSolution
     return MemberSolution(plan, density, mass, float(np.sum(plan * cost)), CONVERGED, iterations, closed)
 
 
+def closed_form_solution(lp: LocalLP) -> MemberSolution | None:
+    """The member's optimum if the closed form applies (module docstring), else None."""
+    p, k = lp.cost.shape
+    if p == 0 or k == 0:
+        return None
+    cost = np.asarray(lp.cost, np.float64)
+    plan = _closed_form(cost, np.asarray(lp.mass, np.float64), unconstrained_bins(lp))
+    if plan is None:
+        return None
+    mass, density = simplex_totals(plan, lp, lp.n_simplices)
+    return MemberSolution(plan, density, mass, float(np.sum(plan * cost)), CONVERGED, 0, True)
+
+
 def unconstrained_bins(lp: LocalLP) -> np.ndarray:
     """``(K,)`` bool: bins whose mass no uniformity constraint ties to another
     bin's (vertex bins, and the only bin of a facet)."""

@@ -15,9 +15,9 @@ import jax
 import numpy as np
 
 from otjax.lp.batched import NewtonOptions, solve_batched
-from otjax.lp.exact import MemberSolution, solve_exact
-from otjax.lp.problem import (FAILED, ITERATION_LIMIT, LocalLP, LPSolution, TransportLP, group_by_class,
-                              member_plan, pack)
+from otjax.lp.exact import MemberSolution, closed_form_solution, solve_exact
+from otjax.lp.problem import (FAILED, ITERATION_LIMIT, LocalLP, LPSolution, TransportLP, check_local,
+                              group_by_class, member_plan, pack)
 
 METHODS = ("auto", "batched", "exact")
 
@@ -93,6 +93,9 @@ def solve_members(problems: Sequence[LocalLP], method: str = "auto", options: Ne
 
     Arguments as in :func:`solve`; members are validated
     (:func:`~otjax.lp.problem.check_local`, a ``ValueError`` naming the problem).
+    With ``"auto"`` and ``"exact"``, members whose optimum has a closed form
+    (:func:`~otjax.lp.exact.closed_form_solution`) are solved so and never
+    padded into a batch.
 
     Example:
       >>> lp = LocalLP(np.array([[4.0, 1.0]]), np.ones(1), np.array([0.0, 1.0]),
@@ -102,7 +105,14 @@ def solve_members(problems: Sequence[LocalLP], method: str = "auto", options: Ne
     """
     out: list[MemberSolution | None] = [None] * len(problems)
     resolves = 0
-    for shape, idx in group_by_class(problems).items():
+    todo = list(range(len(problems)))
+    if method in ("auto", "exact"):
+        for i in todo:
+            check_local(problems[i])
+            out[i] = closed_form_solution(problems[i])
+        todo = [i for i in todo if out[i] is None]
+    for shape, rows in group_by_class([problems[i] for i in todo]).items():
+        idx = [todo[r] for r in rows]
         batch = pack([problems[i] for i in idx], shape=shape)
         result = solve(batch, method, options, dtype, time_limit)
         sol = result.solution

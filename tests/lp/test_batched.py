@@ -1,5 +1,7 @@
 """The batched solver against HiGHS on random padded stencils, and its statuses."""
 
+import importlib
+
 import jax
 import numpy as np
 import pytest
@@ -140,3 +142,23 @@ def test_float64_needs_x64():
     with jax.enable_x64(False):
         with pytest.raises(RuntimeError, match="x64"):
             solve_batched(problem)
+
+
+def test_solve_members_solves_closed_form_members_without_a_batch(monkeypatch):
+    solve_module = importlib.import_module("otjax.lp.solve")  # the package exports a function of that name
+
+    rng = np.random.default_rng(17)
+    general = random_stencil(rng, 20, 12, 2, 1)
+    # every facet with one bin and the points on them: each point's cheapest bin binds nothing
+    single = random_stencil(rng, 15, 3, 2, 1, noise=0.0)
+    packed = []
+    real_pack = solve_module.pack
+    monkeypatch.setattr(solve_module, "pack", lambda members, **kw: packed.append(len(members)) or
+                        real_pack(members, **kw))
+    result = solve_members([single, general], method="exact")
+    assert packed == [1]  # only the general member went into a batch
+    assert result.solutions[0].closed_form and not result.solutions[1].closed_form
+    from otjax.lp.exact import solve_member
+
+    for lp, sol in zip([single, general], result.solutions):
+        assert sol.cost == pytest.approx(solve_member(lp).cost, rel=1e-9, abs=1e-12)
