@@ -38,8 +38,8 @@ from otjax.curves.triangulation import Triangulation
 UPDATE_MIN_ROWS = 512
 # Rows of the scoring calls whose stencils stay at hand for take (the
 # latest calls'). The winner of a step was usually scored a few dozen calls
-# before; one not at hand is exported and scored again. The bound keeps
-# memory at tens of megabytes.
+# before; one not at hand is exported and scored again
+# (docs/decisions.md#hot_rows).
 HOT_ROWS = 1 << 18
 
 
