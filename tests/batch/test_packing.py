@@ -164,3 +164,17 @@ def test_small_batches_go_to_the_small_shape_when_that_pads_less():
     many = [(100, 5, 2)] * 800
     got = choose_packing(many, 1 << 15, scoring.capacity, shape_for, scoring.MIN_ROWS)
     assert got == pack_next_fit(many, 1 << 15, scoring.capacity)
+
+
+@settings(max_examples=200, deadline=None)
+@given(jobs=st.lists(st.tuples(st.integers(1, 60), st.integers(0, 10), st.integers(0, 10)), min_size=1, max_size=12),
+       budget=st.sampled_from([64, 256]), min_rows=st.sampled_from([64, 128]))
+def test_jobs_fitting_one_smallest_batch_are_one_batch(jobs, budget, min_rows):
+    """The shortcut for a few small jobs gives what the full choice would:
+    next fit (or first fit) puts them all in one batch."""
+    shape_for = ShapePolicy(min_rows, budget).shape_for
+    got = choose_packing(jobs, budget, pow2, shape_for, min_rows)
+    if pow2(*total(jobs, list(range(len(jobs))))) <= min(min_rows, budget):
+        assert got == [list(range(len(jobs)))]
+        assert got == pack_next_fit(jobs, budget, pow2)
+    assert got in considered(jobs, budget, pow2, min_rows)
