@@ -13,7 +13,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from otjax.predicates import orient_scalar
+from otjax.predicates import ORIENT_ERR, orient_scalar
 
 
 class CollapsePlan(NamedTuple):
@@ -254,6 +254,8 @@ def plan_flips(tri, source: int, target: int) -> Flips | None:
     ring, star = tri.star(source)
     if target not in ring:
         return None
+    if _sees_every_edge(tri.xy_list, target, ring):
+        return Flips(ring, star, (), (), ring, _fan(target, ring))
     polygon = _Ring(tri, source, target, ring)
     poly = polygon.poly
     clipped: list[int] = []
@@ -264,9 +266,33 @@ def plan_flips(tri, source: int, target: int) -> Flips | None:
         flipped_out.append((poly[chosen - 1], a, poly[(chosen + 1) % n]))
         clipped.append(a)
         del poly[chosen]
+    return Flips(tuple(ring), tuple(star), tuple(clipped), tuple(flipped_out), tuple(poly), _fan(target, poly))
+
+
+def _fan(target: int, poly) -> tuple[tuple[int, int, int], ...]:
+    """The triangles ``(target, u, w)`` over the polygon edges away from ``target``."""
     n = len(poly)
-    fan = tuple((target, poly[k], poly[(k + 1) % n]) for k in range(n) if target not in (poly[k], poly[(k + 1) % n]))
-    return Flips(tuple(ring), tuple(star), tuple(clipped), tuple(flipped_out), tuple(poly), fan)
+    return tuple((target, poly[k], poly[(k + 1) % n]) for k in range(n) if target not in (poly[k], poly[(k + 1) % n]))
+
+
+def _sees_every_edge(xyl: list, target: int, ring) -> bool:
+    """Whether every ring edge away from ``target`` is certainly CCW seen
+    from it (the float filter of :func:`~otjax.predicates.orient_scalar`):
+    most collapses need no flip, and this answers them without the
+    planning machinery. ``False`` when unsure: the full planning decides."""
+    tx, ty = xyl[target]
+    n = len(ring)
+    for k in range(n):
+        a, b = ring[k], ring[(k + 1) % n]
+        if a == target or b == target:
+            continue
+        (ax, ay), (bx, by) = xyl[a], xyl[b]
+        left = (ax - tx) * (by - ty)
+        right = (ay - ty) * (bx - tx)
+        det = left - right
+        if not det > ORIENT_ERR * (abs(left) + abs(right)):
+            return False
+    return True
 
 
 def plan_from_flips(tri, source: int, target: int, flips: Flips) -> CollapsePlan | None:
