@@ -135,7 +135,15 @@ def _rank(run: Run, sources) -> Callable:
     order), then ring order -- the order a full scoring enters them in."""
     rank = {v: i for i, v in enumerate(sorted(sources))}
     ring = run.engine.ring
-    return lambda k: (rank[k[0]], ring(k[0]).index(k[1]))
+    slots: dict[int, dict[int, int]] = {}  # source -> {target: place in its ring}
+
+    def order(k):
+        slot = slots.get(k[0])
+        if slot is None:
+            slot = slots[k[0]] = {w: i for i, w in enumerate(ring(k[0]))}
+        return rank[k[0]], slot[k[1]]
+
+    return order
 
 
 def score(run: Run, sources, targets=None, *, keep: bool = True, while_waiting=None) -> None:
