@@ -39,7 +39,8 @@ def pack_first_fit(sizes, budget: int, capacity: Callable[..., int]) -> list[lis
         its arrays by rows and two more extents, e.g. edges and triangles).
       budget: row capacity of a batch; a job that needs more opens a batch
         of its own capacity, which smaller jobs then fill.
-      capacity: ``capacity(rows, second, third, n_jobs) -> rows`` of the kernel.
+      capacity: ``capacity(rows, second, third, n_jobs) -> rows`` of the
+        kernel, non-decreasing in each argument.
 
     Returns:
       Batches as lists of job indices, each increasing; every job in exactly
@@ -52,10 +53,22 @@ def pack_first_fit(sizes, budget: int, capacity: Callable[..., int]) -> list[lis
       [[1], [0, 2]]
     """
     order = sorted(range(len(sizes)), key=lambda i: -sizes[i][0])
+    # The smallest extents among the jobs from each position on: a batch
+    # that cannot take them is full for every job after (capacity grows
+    # with its arguments) and is no longer tried.
+    low = [(0, 0, 0)] * (len(order) + 1)
+    for k in range(len(order) - 1, -1, -1):
+        r, e, t = sizes[order[k]]
+        if k + 1 < len(order):
+            r2, e2, t2 = low[k + 1]
+            r, e, t = min(r, r2), min(e, e2), min(t, t2)
+        low[k] = (r, e, t)
     bins: list[_Bin] = []
-    for i in order:
+    open_bins: list[_Bin] = []
+    for k, i in enumerate(order):
         r, e, t = sizes[i]
-        for b in bins:
+        full = []
+        for b in open_bins:
             # Rows bind first: skip the capacity call for batches without room.
             if b.rows + r <= b.limit and capacity(b.rows + r, b.second + e, b.third + t,
                                                   len(b.members) + 1) <= b.limit:
@@ -64,8 +77,16 @@ def pack_first_fit(sizes, budget: int, capacity: Callable[..., int]) -> list[lis
                 b.second += e
                 b.third += t
                 break
+            lr, le, lt = low[k]
+            if b.rows + lr > b.limit or capacity(b.rows + lr, b.second + le, b.third + lt,
+                                                 len(b.members) + 1) > b.limit:
+                full.append(b)
         else:
-            bins.append(_Bin([i], r, e, t, max(budget, capacity(r, e, t, 1))))
+            b = _Bin([i], r, e, t, max(budget, capacity(r, e, t, 1)))
+            bins.append(b)
+            open_bins.append(b)
+        if full:
+            open_bins = [b for b in open_bins if b not in full]
     return [sorted(b.members) for b in bins]
 
 
