@@ -125,13 +125,17 @@ class _Ring:
         if self.side(a, b) > 0:
             self._cut[(a, b)] = 0.0
             return 0.0
-        xy, source, target = self.xy, self.source, self.target
-        e = xy[b] - xy[a]
-        da = float(e[0] * (xy[source, 1] - xy[a, 1]) - e[1] * (xy[source, 0] - xy[a, 0]))
-        db = float(e[0] * (xy[target, 1] - xy[a, 1]) - e[1] * (xy[target, 0] - xy[a, 0]))
+        # Python floats: the same double arithmetic as on the array, without
+        # NumPy's per-scalar overhead.
+        xyl = self.xyl
+        (ax, ay), (bx, by) = xyl[a], xyl[b]
+        (sx, sy), (tx, ty) = xyl[self.source], xyl[self.target]
+        ex, ey = bx - ax, by - ay
+        da = ex * (sy - ay) - ey * (sx - ax)
+        db = ex * (ty - ay) - ey * (tx - ax)
         s = da / (da - db) if da != db else 1.0
         if self._span is None:
-            self._span = float(np.hypot(*(xy[target] - xy[source])))
+            self._span = float(np.hypot(tx - sx, ty - sy))
         out = self._cut[(a, b)] = (1.0 - min(max(s, 0.0), 1.0)) * self._span
         return out
 

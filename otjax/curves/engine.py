@@ -25,7 +25,7 @@ import numpy as np
 
 from otjax.batch.pipeline import pipelined
 from otjax.curves import scoring
-from otjax.curves.export import HostBatch, Stencils, export_jobs, located_batches, packed_batches
+from otjax.curves.export import HostBatch, Stencils, export_jobs, held_bytes, located_batches, packed_batches
 from otjax.curves.plan import Change, TransportPlan
 from otjax.curves.relocation import optimal_position
 from otjax.curves.rescoring import ChangeLog, LinkUpdates
@@ -36,11 +36,11 @@ from otjax.curves.triangulation import Triangulation
 # Collapses whose stencil has fewer rows are scored again in full rather than
 # updated on their link (docs/decisions.md#update_min_rows).
 UPDATE_MIN_ROWS = 512
-# Rows of the scoring calls whose stencils stay at hand for take (the
-# latest calls'). The winner of a step was usually scored a few dozen calls
-# before; one not at hand is exported and scored again
-# (docs/decisions.md#hot_rows).
-HOT_ROWS = 1 << 18
+# Bytes of the scoring calls whose stencils stay at hand for take (the
+# latest calls': their host batches and kernel outputs). The winner of a
+# step was usually scored a few dozen calls before; one not at hand is
+# exported and scored again (docs/decisions.md#hot_bytes).
+HOT_BYTES = 64 << 20
 
 
 class Scored(NamedTuple):
@@ -93,7 +93,7 @@ class CurveEngine:
         # scoring calls, by call in _hot_calls ({call: (rows, keys)}, oldest first).
         self._hot: dict[int, dict] = {}
         self._hot_calls: OrderedDict = OrderedDict()
-        self._hot_rows = 0
+        self._hot_bytes = 0
         self._calls = 0
         self._records: dict[int, dict] = {}  # {source: {target: LinkRecord}}
         self._partial: dict = {}  # key -> Partial, within one score call
@@ -235,16 +235,16 @@ class CurveEngine:
                 self._hot.setdefault(key[0], {})[key[1]] = (cands, costs, j, plan, version[key[0]], call)
                 kept.append(key)
         if kept:
-            self._keep_hot(call, len(batch.row_point), kept)
+            self._keep_hot(call, held_bytes(batch, costs), kept)
 
-    def _keep_hot(self, call: int, rows: int, keys: list) -> None:
-        """Registers the hot stencils of one call, dropping the oldest calls'
-        beyond :data:`HOT_ROWS` rows."""
-        self._hot_calls[call] = (rows, keys)
-        self._hot_rows += rows
-        while self._hot_rows > HOT_ROWS and len(self._hot_calls) > 1:
+    def _keep_hot(self, call: int, size: int, keys: list) -> None:
+        """Registers the hot stencils of one call (``size`` bytes held),
+        dropping the oldest calls' beyond :data:`HOT_BYTES`."""
+        self._hot_calls[call] = (size, keys)
+        self._hot_bytes += size
+        while self._hot_bytes > HOT_BYTES and len(self._hot_calls) > 1:
             old, (n, old_keys) = self._hot_calls.popitem(last=False)
-            self._hot_rows -= n
+            self._hot_bytes -= n
             for s, t in old_keys:
                 targets = self._hot.get(s)
                 if targets is not None and t in targets and targets[t][5] == old:

@@ -247,6 +247,9 @@ class Stencils(Sequence):
     first read: a scoring reads a few of them (the winner, large stencils),
     not all.
 
+    It holds the batch's arrays, not the batch (which holds it): no
+    reference cycle, so a dropped batch is freed at once.
+
     Args:
       jobs: the batch's jobs.
       batch: the :class:`HostBatch` exported from them.
@@ -257,9 +260,10 @@ class Stencils(Sequence):
 
     def __init__(self, jobs: list[Job], batch: HostBatch, edge_keys: np.ndarray, on_host: bool):
         self.jobs = jobs
-        self.batch = batch
         self.edge_keys = edge_keys
-        self.on_host = on_host
+        self.edge_xy, self.row_point, self.before = batch.edge_xy, batch.row_point, batch.before
+        self.edge_start, self.row_start, self.n_inside = batch.edge_start, batch.row_start, batch.n_inside
+        self.located = (batch.row_cand, batch.row_tri) if on_host else None
         self._made: list = [None] * len(jobs)
 
     def __len__(self) -> int:
@@ -274,15 +278,15 @@ class Stencils(Sequence):
             return [self[i] for i in range(*j.indices(len(self)))]
         c = self._made[j]
         if c is None:
-            b, job = self.batch, self.jobs[j]
-            es = slice(b.edge_start[j], b.edge_start[j + 1])
-            rs = slice(b.row_start[j], b.row_start[j + 1])
+            job = self.jobs[j]
+            es = slice(self.edge_start[j], self.edge_start[j + 1])
+            rs = slice(self.row_start[j], self.row_start[j + 1])
             cand = tri = None
-            if self.on_host:
-                cand = b.row_cand[rs] - b.edge_start[j]
-                tri = b.row_tri[rs]
-            c = self._made[j] = CandidateStencil(job.plan, self.edge_keys[es], b.edge_xy[es], b.row_point[rs],
-                                                 int(b.n_inside[j]), float(b.before[j]), job.moved, cand, tri)
+            if self.located is not None:
+                cand = self.located[0][rs] - self.edge_start[j]
+                tri = self.located[1][rs]
+            c = self._made[j] = CandidateStencil(job.plan, self.edge_keys[es], self.edge_xy[es], self.row_point[rs],
+                                                 int(self.n_inside[j]), float(self.before[j]), job.moved, cand, tri)
         return c
 
 
@@ -326,6 +330,19 @@ class Costs(Sequence):
 
     def __setitem__(self, j: int, cost: CandidateCost) -> None:
         self._made[j] = cost
+
+
+def held_bytes(batch: HostBatch, costs: Costs) -> int:
+    """Bytes of the arrays that keeping ``batch`` and its ``costs`` holds
+    (each underlying buffer once)."""
+    arrays = [v for v in vars(batch).values() if isinstance(v, np.ndarray)]
+    arrays += [*costs.fields, costs.assignment, costs.triangle]
+    owners = {}
+    for a in arrays:
+        while isinstance(a.base, np.ndarray):
+            a = a.base
+        owners[id(a)] = a.nbytes
+    return sum(owners.values())
 
 
 def export_jobs(jobs: list[Job], plan, on_host: bool) -> HostBatch:
