@@ -160,7 +160,9 @@ def run_child(n: int, queue: str, seed: int, timeout: float, cache: str | None =
         out = Path(tmp) / "run.json"
         cmd = [sys.executable, __file__, "--child", str(n), queue, str(seed), str(out), cache or ""]
         try:
-            proc = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout, check=False)
+            # A cold run is cold whatever cache the caller's environment names.
+            env = {k: v for k, v in os.environ.items() if k != "JAX_COMPILATION_CACHE_DIR"}
+            proc = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout, check=False, env=env)
         except subprocess.TimeoutExpired:
             return {"n": n, "queue": queue, "error": f"timed out after {timeout:.0f} s"}
         if proc.returncode != 0 or not out.exists():
