@@ -22,9 +22,7 @@ Example::
 from __future__ import annotations
 
 import argparse
-import json
 import os
-import platform
 import sys
 import time
 
@@ -32,23 +30,13 @@ sys.path.insert(0, os.path.join(os.path.dirname(__file__), ".."))
 
 import numpy as np  # noqa: E402
 
+from bench_surface_lp import machine, write_json  # noqa: E402  (scripts/ is on the path)
 from otjax.surfaces.initial_complex import FRACTION, initial_complex  # noqa: E402
 from otjax.surfaces.plan import BinSettings  # noqa: E402
 from otjax.surfaces.solvers import LocalSolver  # noqa: E402
 from tests.surfaces.shapes import CROSS, CUBE, SQUARE, diagonal, fit  # noqa: E402
 
 SHAPES = {"cube": CUBE, "square": SQUARE, "cross": CROSS}
-
-
-def machine() -> dict:
-    model = platform.processor()
-    try:
-        with open("/proc/cpuinfo") as f:
-            model = next(line.split(":", 1)[1].strip() for line in f if line.startswith("model name"))
-    except (OSError, StopIteration):
-        pass
-    return {"cpu": model, "cores": os.cpu_count(), "platform": platform.platform(),
-            "load_average": os.getloadavg()}
 
 
 def run(shape_name: str, n: int, seed: int, min_bins: int | None, fraction: float, with_fit: bool) -> dict:
@@ -110,10 +98,7 @@ def main() -> None:
     if args.json:
         out = {"machine": info, "rows": rows,
                "command": "python scripts/bench_initial_complex.py " + " ".join(sys.argv[1:])}
-        os.makedirs(os.path.dirname(args.json) or ".", exist_ok=True)
-        with open(args.json, "w") as f:
-            json.dump(out, f, indent=1)
-        print(f"wrote {args.json}")
+        write_json(args.json, out)
 
 
 if __name__ == "__main__":

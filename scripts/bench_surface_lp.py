@@ -82,6 +82,14 @@ def machine() -> dict:
             "platform": platform.platform(), "load_average": os.getloadavg()}
 
 
+def write_json(path: str, doc: dict) -> None:
+    """Writes a benchmark's rows (creating the folder) and says where."""
+    os.makedirs(os.path.dirname(path) or ".", exist_ok=True)
+    with open(path, "w") as f:
+        json.dump(doc, f, indent=1)
+    print(f"wrote {path}")
+
+
 def bench_highs(stencils) -> tuple[float, np.ndarray]:
     """Seconds per stencil and the optimal costs."""
     t = time.perf_counter()
@@ -175,10 +183,7 @@ def main() -> None:
     rows = run(sizes, batches, n_exact, options, dtypes, args.budget, args.max_batch_variables)
     out = {"machine": info, "options": options._asdict(), "rows": rows,
            "command": "python scripts/bench_surface_lp.py " + " ".join(os.sys.argv[1:])}
-    os.makedirs(os.path.dirname(args.json) or ".", exist_ok=True)
-    with open(args.json, "w") as f:
-        json.dump(out, f, indent=1)
-    print(f"wrote {args.json}")
+    write_json(args.json, out)
 
 
 if __name__ == "__main__":
