@@ -16,11 +16,18 @@ Public API (2D curves):
 - :mod:`otjax.batch` -- kernel batches shared by every dimension: field
   specs, packing, the dispatch pipeline.
 - :mod:`otjax.stencil` -- padded stencil batches of the public batched kernel.
+
+Surfaces (3D, Digne et al. 2014), the transport layer so far:
+
+- :mod:`otjax.lp` -- padded batches of local transport LPs, the batched JAX
+  solver and the exact HiGHS one, per-member status.
+- :mod:`otjax.surfaces` -- the simplicial complex, facet bins, the sparse
+  transport plan, local relaxation and the initial complex.
 - :func:`enable_compilation_cache` -- keep compiled kernels on disk for
   later processes (the command line does by default).
 """
 
-from otjax import batch, curves, datasets, decimation, metrics, stencil
+from otjax import batch, curves, datasets, decimation, lp, metrics, stencil, surfaces
 from otjax.background import Background, estimate_background
 from otjax.compile_cache import enable_compilation_cache
 from otjax.curves.reconstruct import reconstruct_curve
@@ -37,9 +44,11 @@ __all__ = [
     "enable_compilation_cache",
     "estimate_background",
     "image_to_points",
+    "lp",
     "metrics",
     "read_points",
     "reconstruct_curve",
     "stencil",
+    "surfaces",
 ]
 __version__ = "0.1.0"
