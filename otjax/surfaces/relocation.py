@@ -33,7 +33,7 @@ from otjax.lp.problem import CONVERGED, ITERATION_LIMIT, capacity_class
 from otjax.surfaces.fixed_plan_cost import (FixedPlanEntries, TargetSegments, fixed_plan_cost, refine_positions,
                                             vertex_targets)
 from otjax.surfaces.plan import SurfacePlan
-from otjax.surfaces.relaxation import GAIN, Solver, rounds_of
+from otjax.surfaces.relaxation import GAIN, TOLERANCE, Solver, rounds_of
 
 #: Alternations of (move half way, re-solve the star) per call of :func:`relocate`.
 ROUNDS = 4
@@ -46,7 +46,13 @@ REFINE_STEPS = 8
 #: Halvings of a refinement step tried when the full step flattens a facet.
 REFINE_HALVINGS = 8
 
+# Smallest padded sizes (powers of two): a relocation of a one-ring or a
+# refinement of a few stars fits the first class, so one shape compiles.
 _MIN_ROWS = 8
+_MIN_VERTICES = 32
+_MIN_POINTS = 64
+_MIN_ENTRIES = 256
+_MIN_SHARES = 64
 
 
 class PackedEntries(NamedTuple):
@@ -76,7 +82,7 @@ class RelocationStats(NamedTuple):
       rejected: moves undone (the re-solved star cost rose).
       degenerate: moves not made because a star facet would degenerate.
       solves: local LPs solved.
-      rounds: alternations run (stops early when no move is kept).
+      rounds: alternations run.
       moved: ids of the vertices whose position changed, increasing.
       changed: ids of every vertex of a star whose entries or positions
         changed (the moved vertices and their neighbours), increasing: what
@@ -150,10 +156,10 @@ def pack_entries(plan: SurfacePlan, simplices: Sequence, vertices: Sequence[int]
         bary, mass, segment = np.zeros((0, 3)), np.zeros(0), np.zeros(0, np.int64)
     ids, rows = np.unique(np.concatenate([corners.ravel(), np.asarray(vertices, np.int64)]), return_inverse=True)
     pids, prow = np.unique(point, return_inverse=True)
-    n, cap = len(point), capacity_class(len(point), _MIN_ROWS)
+    n, cap = len(point), capacity_class(len(point), _MIN_ENTRIES)
     pad = (lambda a, size: np.concatenate([a, np.zeros((size - len(a),) + a.shape[1:], a.dtype)]))
-    positions = pad(plan.complex.positions[ids], capacity_class(len(ids), _MIN_ROWS))
-    points = pad(plan.points[pids], capacity_class(len(pids), _MIN_ROWS))
+    positions = pad(plan.complex.positions[ids], capacity_class(len(ids), _MIN_VERTICES))
+    points = pad(plan.points[pids], capacity_class(len(pids), _MIN_POINTS))
     entries = FixedPlanEntries(pad(prow.astype(np.int64), cap), pad(rows[:3 * n].reshape(n, 3).astype(np.int64), cap),
                                pad(bary, cap), pad(mass, cap))
     return PackedEntries(ids, positions, points, entries, pad(segment, cap))
@@ -214,7 +220,7 @@ def star_targets(plan: SurfacePlan, vertices: Sequence[int], quadratic: bool = F
     share_row = np.array([r for r, _ in shares], np.int64)
     row_vertex = _rows_of(packed, vertices)
     n_rows = capacity_class(len(vertices), _MIN_ROWS)
-    row = np.zeros(capacity_class(len(shares), _MIN_ROWS), np.int64)
+    row = np.zeros(capacity_class(len(shares), _MIN_SHARES), np.int64)
     row[:len(shares)] = share_row
     segments = TargetSegments(row_vertex[share_row[packed.segment]], packed.segment, row,
                               np.concatenate([row_vertex, np.zeros(n_rows - len(vertices), np.int64)]))
@@ -281,7 +287,9 @@ def relocate(plan: SurfacePlan, vertices: Sequence[int], solve: Solver, rounds: 
       plan: the plan; its complex's positions and its entries change.
       vertices: live vertex ids to relocate (duplicates and dead ids are ignored).
       solve: the local LP solver (:data:`~otjax.surfaces.relaxation.Solver`).
-      rounds: at most this many alternations (stops when a round keeps no move).
+      rounds: at most this many alternations; stops after a round that
+        lowers the cost of the stars it moves by less than
+        :data:`~otjax.surfaces.relaxation.TOLERANCE` of it.
       damping: the fraction of the way to the target a move goes.
       quadratic: the targets' weighting (:func:`relocation_targets`).
 
@@ -293,23 +301,24 @@ def relocate(plan: SurfacePlan, vertices: Sequence[int], solve: Solver, rounds: 
     vertices = sorted({int(v) for v in vertices if c.alive[v]})
     stencil = {v: (c.vertex_closure(v).vertices, c.star(v).triangles) for v in vertices}
     groups = [[vertices[i] for i in g] for g in rounds_of([stencil[v][0] for v in vertices])]
-    tally = dict(delta=0.0, accepted=0, rejected=0, degenerate=0, solves=0)
+    tally = dict(delta=0.0, accepted=0, rejected=0, degenerate=0, solves=0, star_cost=0.0)
     moved: set[int] = set()
     done = 0
     for _ in range(rounds):
         done += 1
-        kept = sum(_relocate_group(plan, group, stencil, solve, damping, quadratic, tally, moved)
-                   for group in groups)
-        if kept == 0:
+        delta, tally["star_cost"] = tally["delta"], 0.0
+        for group in groups:
+            _relocate_group(plan, group, stencil, solve, damping, quadratic, tally, moved)
+        if delta - tally["delta"] <= TOLERANCE * tally["star_cost"]:
             break
     changed = sorted({u for v in moved for u in stencil[v][0]})
     return RelocationStats(tally["delta"], tally["accepted"], tally["rejected"], tally["degenerate"],
                            tally["solves"], done, tuple(sorted(moved)), tuple(changed))
 
 
-def _relocate_group(plan, group, stencil, solve, damping, quadratic, tally, moved) -> int:
-    """One move and re-solve of vertices with disjoint closed stars; returns
-    the moves kept and adds to ``tally`` and ``moved``."""
+def _relocate_group(plan, group, stencil, solve, damping, quadratic, tally, moved) -> None:
+    """One move and re-solve of vertices with disjoint closed stars; adds
+    to ``tally`` and ``moved``."""
     c = plan.complex
     targets = relocation_targets(plan, group, quadratic)
     trial = []  # (vertex, old position, cost of its star before the move)
@@ -322,14 +331,14 @@ def _relocate_group(plan, group, stencil, solve, damping, quadratic, tally, move
             tally["degenerate"] += 1
             continue
         trial.append((v, old, plan.stencil(*stencil[v]).cost))
+        tally["star_cost"] += trial[-1][2]
         c.move(v, new)
     if not trial:
-        return 0
+        return
     cut = [plan.stencil(*stencil[v]) for v, _, _ in trial]
     solvable = [i for i, s in enumerate(cut) if len(s.points)]
     solutions = dict(zip(solvable, solve([cut[i].lp for i in solvable]) if solvable else []))
     tally["solves"] += len(solvable)
-    kept = 0
     for i, ((v, old, before), s) in enumerate(zip(trial, cut)):
         best, written = s.cost, None
         sol = solutions.get(i)
@@ -344,11 +353,9 @@ def _relocate_group(plan, group, stencil, solve, damping, quadratic, tally, move
             tally["delta"] += best - before
             tally["accepted"] += 1
             moved.add(v)
-            kept += 1
         else:
             c.move(v, old)
             tally["rejected"] += 1
-    return kept
 
 
 # ------------------------------------------------------------- refinement
