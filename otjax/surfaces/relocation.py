@@ -30,8 +30,8 @@ import numpy as np
 
 from otjax.batch.pipeline import require_x64
 from otjax.lp.problem import CONVERGED, ITERATION_LIMIT, capacity_class
-from otjax.surfaces.fixed_plan_cost import (FixedPlanEntries, TargetSegments, fixed_plan_cost, refine_positions,
-                                            vertex_targets)
+from otjax.surfaces.fixed_plan_cost import (FixedPlanEntries, TargetSegments, fixed_plan_cost,
+                                            refine_positions, vertex_targets)
 from otjax.surfaces.plan import SurfacePlan
 from otjax.surfaces.relaxation import GAIN, TOLERANCE, Solver, rounds_of
 
@@ -147,21 +147,24 @@ def pack_entries(plan: SurfacePlan, simplices: Sequence, vertices: Sequence[int]
       >>> p.vertex_ids.tolist(), float(p.entries.mass.sum()), p.segment[:2].tolist()
       ([0, 1], 2.0, [0, 1])
     """
-    parts = [(s, got) for s, got in enumerate(_simplex_entries(plan, x) for x in simplices) if got is not None]
+    found = (_simplex_entries(plan, x) for x in simplices)
+    parts = [(s, got) for s, got in enumerate(found) if got is not None]
     if parts:
         point, corners, bary, mass = (np.concatenate([g[k] for _, g in parts]) for k in range(4))
         segment = np.concatenate([np.full(len(g[0]), s, np.int64) for s, g in parts])
     else:
         point, corners = np.zeros(0, np.int64), np.zeros((0, 3), np.int64)
         bary, mass, segment = np.zeros((0, 3)), np.zeros(0), np.zeros(0, np.int64)
-    ids, rows = np.unique(np.concatenate([corners.ravel(), np.asarray(vertices, np.int64)]), return_inverse=True)
+    wanted = np.concatenate([corners.ravel(), np.asarray(vertices, np.int64).ravel()])
+    ids, rows = np.unique(wanted, return_inverse=True)
     pids, prow = np.unique(point, return_inverse=True)
     n, cap = len(point), capacity_class(len(point), _MIN_ENTRIES)
     pad = (lambda a, size: np.concatenate([a, np.zeros((size - len(a),) + a.shape[1:], a.dtype)]))
     positions = pad(plan.complex.positions[ids], capacity_class(len(ids), _MIN_VERTICES))
     points = pad(plan.points[pids], capacity_class(len(pids), _MIN_POINTS))
-    entries = FixedPlanEntries(pad(prow.astype(np.int64), cap), pad(rows[:3 * n].reshape(n, 3).astype(np.int64), cap),
-                               pad(bary, cap), pad(mass, cap))
+    corner_rows = rows[:3 * n].reshape(n, 3).astype(np.int64)
+    entries = FixedPlanEntries(pad(prow.astype(np.int64), cap), pad(corner_rows, cap), pad(bary, cap),
+                               pad(mass, cap))
     return PackedEntries(ids, positions, points, entries, pad(segment, cap))
 
 
@@ -225,8 +228,9 @@ def star_targets(plan: SurfacePlan, vertices: Sequence[int], quadratic: bool = F
     segments = TargetSegments(row_vertex[share_row[packed.segment]], packed.segment, row,
                               np.concatenate([row_vertex, np.zeros(n_rows - len(vertices), np.int64)]))
     got = vertex_targets(packed.positions, packed.points, packed.entries, segments, quadratic=quadratic)
-    return StarTargets(np.asarray(got.target)[:len(vertices)], shares,
-                       np.asarray(got.simplex_target)[:len(shares)], np.asarray(got.simplex_mass)[:len(shares)])
+    n = len(shares)
+    return StarTargets(np.asarray(got.target)[:len(vertices)], shares, np.asarray(got.simplex_target)[:n],
+                       np.asarray(got.simplex_mass)[:n])
 
 
 def relocation_targets(plan: SurfacePlan, vertices: Sequence[int], quadratic: bool = False) -> np.ndarray:
@@ -237,7 +241,8 @@ def relocation_targets(plan: SurfacePlan, vertices: Sequence[int], quadratic: bo
       >>> from otjax.surfaces.complex import SimplicialComplex
       >>> from otjax.surfaces.plan import BinSettings
       >>> c = SimplicialComplex(np.eye(3), np.array([[0, 1, 2]]))
-      >>> plan = SurfacePlan(c, np.array([[0.9, 0, 0], [1.1, 0, 0.2]]), np.ones(2), BinSettings(diagonal=1.0))
+      >>> points = np.array([[0.9, 0, 0], [1.1, 0, 0.2]])
+      >>> plan = SurfacePlan(c, points, np.ones(2), BinSettings(diagonal=1.0))
       >>> with jax.enable_x64(True):
       ...     relocation_targets(plan, [0, 2]).round(6).tolist()
       [[1.0, 0.0, 0.1], [0.0, 0.0, 1.0]]
@@ -248,7 +253,8 @@ def relocation_targets(plan: SurfacePlan, vertices: Sequence[int], quadratic: bo
 # --------------------------------------------------------------- geometry
 def aspect(corners: np.ndarray) -> np.ndarray:
     """``(F,)`` ``area / longest edge^2`` of triangles ``(F, 3, 3)`` (0 for a flat one)."""
-    area = 0.5 * np.linalg.norm(np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]), axis=1)
+    cross = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+    area = 0.5 * np.linalg.norm(cross, axis=1)
     longest = np.max(np.sum((corners - np.roll(corners, 1, axis=1)) ** 2, axis=2), axis=1)
     return np.where(longest > 0, area / np.where(longest > 0, longest, 1.0), 0.0)
 
@@ -362,7 +368,8 @@ def _relocate_group(plan, group, stencil, solve, damping, quadratic, tally, move
 _fixed_plan_cost = jax.jit(fixed_plan_cost)
 
 
-def refine(plan: SurfacePlan, vertices: Sequence[int] | None = None, steps: int = REFINE_STEPS) -> RefineStats:
+def refine(plan: SurfacePlan, vertices: Sequence[int] | None = None,
+           steps: int = REFINE_STEPS) -> RefineStats:
     """Gradient refinement of vertex positions with the plan fixed.
 
     Minimises the fixed-plan cost of the simplices around ``vertices`` over
@@ -386,8 +393,9 @@ def refine(plan: SurfacePlan, vertices: Sequence[int] | None = None, steps: int 
     free = np.flatnonzero(c.alive) if vertices is None else np.array(
         sorted({int(v) for v in vertices if c.alive[v]}), np.int64)
     facets = sorted({t for v in free.tolist() for t in c.vertex_triangles[v]})
-    simplices = free.tolist() + facets
-    packed = pack_entries(plan, simplices, free)
+    # every corner of a star facet gets a row, for the degeneracy test
+    corners = np.array(facets, np.int64).reshape(-1, 3)
+    packed = pack_entries(plan, free.tolist() + facets, np.concatenate([free, corners.ravel()]))
     free_mask = np.zeros(len(packed.positions), bool)
     free_mask[_rows_of(packed, free)] = True
     got = refine_positions(packed.positions, free_mask, packed.points, packed.entries, steps)
@@ -396,7 +404,7 @@ def refine(plan: SurfacePlan, vertices: Sequence[int] | None = None, steps: int 
     unchanged = RefineStats(costs[0], costs[0], costs, 0.0, ())
     if not costs[-1] < costs[0]:
         return unchanged
-    rows = _rows_of(packed, np.array(facets, np.int64).reshape(-1, 3))
+    rows = _rows_of(packed, corners)
     step = 1.0
     for _ in range(REFINE_HALVINGS):
         trial = start + step * (end - start)

@@ -206,17 +206,34 @@ def test_relocation_with_resolves_brings_a_lifted_vertex_back_to_the_plane():
     assert np.linalg.norm(plan.complex.positions[4, :2] - home[:2]) < 0.05
 
 
-def test_a_move_that_would_flatten_a_facet_is_not_made():
+def flattening_plan():
+    """One triangle; all mass on vertex 2's bin, nearly all at a point on
+    the line through vertices 0 and 1: the optimum flattens the facet."""
     c = SimplicialComplex(np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0]]), np.array([[0, 1, 2]]))
-    # all mass on vertex 2's bin, at a point on the line through 0 and 1
-    plan = SurfacePlan(c, np.array([[0.5, 0.0, 0.0], [0.5, 0.3, 0.0]]), np.array([1.0, 1e-9]), bin_settings(1))
-    plan.vertex_entries = {2: Entries(np.array([0, 1]), np.zeros(2, np.int64), np.array([1.0, 1e-9]))}
+    points, masses = np.array([[0.5, 0.0, 0.0], [0.5, 0.3, 0.0]]), np.array([1.0, 1e-9])
+    plan = SurfacePlan(c, points, masses, bin_settings(1))
+    plan.vertex_entries = {2: Entries(np.array([0, 1]), np.zeros(2, np.int64), masses)}
+    return plan
+
+
+def test_a_move_that_would_flatten_a_facet_is_not_made():
+    plan = flattening_plan()
     stats = relocate(plan, [2], frozen, rounds=1, damping=1.0)
     assert stats.degenerate == 1 and stats.accepted == 0
     np.testing.assert_array_equal(plan.complex.positions[2], [0.0, 1.0, 0.0])
     stats = relocate(plan, [2], frozen, rounds=1, damping=0.5)
     assert stats.accepted == 1 and plan.complex.positions[2, 1] == pytest.approx(0.5, abs=1e-6)
     assert MIN_ASPECT < 0.2
+
+
+def test_refine_takes_a_shorter_step_rather_than_flatten_a_facet():
+    plan = flattening_plan()
+    before = plan.total_cost()
+    stats = refine(plan, [2])
+    assert stats.step < 1.0 and stats.moved == (2,)
+    assert plan.total_cost() < before
+    a, b, c = plan.complex.positions
+    assert np.linalg.norm(np.cross(b - a, c - a)) / 2 >= MIN_ASPECT * 1.0
 
 
 @settings(max_examples=100, deadline=None)
