@@ -1,5 +1,8 @@
 """Synthetic shapes with known ground truth.
 
+This module holds the 2D curves; the 3D surfaces (:mod:`otjax.datasets3d`)
+are re-exported at its end.
+
 Every generator returns ``(points, truth)``: ``points`` is ``(n, 2)`` float64
 and ``truth`` a dict that always holds the same keys (empty arrays where a
 feature does not occur), so any consumer can read any shape:
@@ -426,3 +429,11 @@ def load_example(name: str, seed: int = 0, n: int | None = None) -> LoadedExampl
     points, truth = generate(name, n=n, seed=seed)
     ex = _EXAMPLES[name]
     return LoadedExample(points, np.ones(len(points)), truth, {"n_vertices": ex.n_vertices, "relevance": ex.relevance})
+
+
+# The 3D surfaces live in otjax.datasets3d (this module holds the 2D shapes); re-exported here.
+from otjax.datasets3d import (  # noqa: E402
+    RECOVERY, SURFACES, RecoverySample, SurfaceSample, SurfaceTruth, box_pair, box_pair_truth, cone, cone_truth,
+    crossing, crossing_truth, cube, cube_truth, cylinder, cylinder_truth, holed_square, holed_square_truth,
+    outlier_box, rounded_box, rounded_cube_mesh, sample_surface, staircase, staircase_truth,
+)
