@@ -1,0 +1,244 @@
+"""The surface engine: what the greedy loop (:mod:`otjax.decimation.loop`) calls.
+
+:class:`SurfaceEngine` owns a :class:`~otjax.surfaces.plan.SurfacePlan` (and
+through it the complex) and implements the loop's
+:class:`~otjax.decimation.loop.Engine` protocol for half-edge collapses
+(§4.2): scoring goes through :mod:`otjax.surfaces.collapse_scoring`;
+:meth:`~SurfaceEngine.apply` collapses the complex, writes the winner's
+local plan (solved again by HiGHS) over the closed star of the target, and
+returns a :class:`SurfaceChange`. Calls run one way: nothing below calls
+back up.
+
+Vertex moves (§4.3) plug in through :meth:`~SurfaceEngine.movable` and
+:meth:`~SurfaceEngine.propose_moves`; none are proposed yet.
+"""
+
+from __future__ import annotations
+
+import time
+from collections import OrderedDict
+from typing import NamedTuple
+
+import numpy as np
+
+from otjax.lp.batched import NewtonOptions
+from otjax.lp.exact import solve_member
+from otjax.lp.problem import CONVERGED
+from otjax.surfaces.collapse_scoring import (CollapseCandidate, ScoredCollapse, build_candidates,
+                                             score_candidates)
+from otjax.surfaces.complex import CollapseChange
+from otjax.surfaces.plan import SurfacePlan
+
+#: Sources of higher degree are not drawn (sampling rejects slots past it);
+#: the exhaustive queue still scores them.
+DEGREE_BOUND = 32
+#: Scored candidates kept at hand for :meth:`SurfaceEngine.take` (the latest
+#: ones); an older winner is built again, which solves nothing.
+HOT_CANDIDATES = 512
+
+
+class SurfaceChange(NamedTuple):
+    """What :meth:`SurfaceEngine.apply` did.
+
+    Attributes:
+      source, target: the collapsed half-edge.
+      dirty: live vertices whose outgoing half-edges' scores are stale.
+      ring: the source's one-ring before the collapse (``target`` included).
+      delta: the change of the plan's total cost.
+      collapse: the complex's :class:`~otjax.surfaces.complex.CollapseChange`.
+    """
+
+    source: int
+    target: int
+    dirty: frozenset
+    ring: tuple[int, ...]
+    delta: float
+    collapse: CollapseChange
+
+
+class Taken(NamedTuple):
+    """A candidate taken to be applied: ``engine.apply(*taken)``."""
+
+    candidate: CollapseCandidate
+
+
+class SurfaceEngine:
+    """A surface transport plan and the machinery that scores and applies collapses.
+
+    Args:
+      plan: the plan (owned and mutated from now on, with its complex).
+      method: scoring solver: ``"auto"`` (JAX batches, HiGHS for members not
+        certified) or ``"exact"`` (HiGHS).
+      options: the JAX solver's settings.
+      degree_bound: see :data:`DEGREE_BOUND`.
+
+    ``"auto"`` needs JAX's float64 mode (``jax.enable_x64``).
+
+    Example:
+      >>> from tests.surfaces.complexes import sphere_complex  # doctest: +SKIP
+      >>> from otjax.decimation import decimate  # doctest: +SKIP
+      >>> engine = SurfaceEngine(plan, method="exact")  # doctest: +SKIP
+      >>> stats = decimate(engine, 10, queue="multiple-choice")  # doctest: +SKIP
+    """
+
+    def __init__(self, plan: SurfacePlan, *, method: str = "auto", options: NewtonOptions = NewtonOptions(),
+                 degree_bound: int = DEGREE_BOUND):
+        self.plan = plan
+        self.method = method
+        self.options = options
+        self._versions = [0] * len(plan.complex.alive)
+        self._degree_bound = degree_bound
+        self._hot: OrderedDict = OrderedDict()  # (source, target) -> (version, CollapseCandidate)
+        self._bins: dict = {}  # bins of facets that may appear, valid while no vertex moves
+        self.counts = {"scored": 0, "updated": 0, "partial": 0, "refused": 0, "exact_resolves": 0,
+                       "kernel_calls": 0}
+        self.seconds = {"export": 0.0, "score": 0.0}
+        self.sizes: list[tuple[int, int]] = []  # (points, bins) of every scored stencil, in order
+
+    # ------------------------------------------------------------ the loop's view
+    @property
+    def versions(self) -> list[int]:
+        """Per-vertex versions (read only): a score is stale once its source's moved on."""
+        return self._versions
+
+    @property
+    def degree_bound(self) -> int:
+        return self._degree_bound
+
+    def live_sources(self) -> list[int]:
+        """Live vertices, increasing (isolated ones too: they count, and have no half-edge)."""
+        return np.flatnonzero(self.plan.complex.alive).tolist()
+
+    def ring(self, v: int) -> tuple[int, ...]:
+        """Neighbours of ``v``, increasing."""
+        return self.plan.complex.neighbors(v)
+
+    def free(self, v: int) -> bool:
+        """Every live vertex may be a collapse target."""
+        return bool(self.plan.complex.alive[v])
+
+    def prefetch(self, half_edges) -> None:
+        """Nothing to read ahead: a candidate is built when scored."""
+
+    def stats(self) -> dict:
+        """Counters (``scored``, ``updated``, ``partial``, ``kernel_calls``,
+        ``refused``, ``exact_resolves``) and ``seconds`` (``export``, ``score``)."""
+        return {**self.counts, "seconds": dict(self.seconds)}
+
+    def score(self, sources, targets: dict | None = None, *, veto=None, keep: bool = True,
+              while_waiting=None) -> list[tuple[tuple[int, int], float]]:
+        """Scores the half-edges leaving ``sources`` (all, or ``targets[v]``)
+        in one batched solve; returns ``[(half-edge, delta)]`` of the
+        admissible ones that ``veto(candidate, scored)`` (if given) accepts.
+        ``while_waiting`` is not called: nothing is prefetched."""
+        c = self.plan.complex
+        keys = [(v, w) for v in sorted(sources) if c.alive[v]
+                for w in (c.neighbors(v) if targets is None else targets[v]) if c.alive[w] and c.has_edge(v, w)]
+        scored = self.score_half_edges(keys)
+        out = []
+        for key, s in zip(keys, scored):
+            if s is None or (veto is not None and not veto(s.candidate, s)):
+                continue
+            out.append((key, s.delta))
+            if keep:
+                self._keep(key, s.candidate)
+        return out
+
+    def score_half_edges(self, keys) -> list[ScoredCollapse | None]:
+        """``ScoredCollapse`` of each half-edge (``None``: refused), one solve for all."""
+        t0 = time.perf_counter()
+        cands = build_candidates(self.plan, keys, self._bins)
+        live = [c for c in cands if c is not None]
+        t1 = time.perf_counter()
+        scored, solved = score_candidates(live, "exact" if self.method == "exact" else "auto", self.options)
+        self.seconds["export"] += t1 - t0
+        self.seconds["score"] += time.perf_counter() - t1
+        self.counts["scored"] += len(live)
+        self.counts["refused"] += len(cands) - len(live) + sum(s is None for s in scored)
+        self.counts["exact_resolves"] += solved.exact_resolves
+        self.counts["kernel_calls"] += solved.kernel_calls
+        self.sizes.extend(c.stencil.lp.cost.shape for c in live)
+        it = iter(scored)
+        return [None if c is None else next(it) for c in cands]
+
+    def _keep(self, key, cand: CollapseCandidate) -> None:
+        self._hot[key] = (self._versions[key[0]], cand)
+        self._hot.move_to_end(key)
+        while len(self._hot) > HOT_CANDIDATES:
+            self._hot.popitem(last=False)
+
+    def take(self, keys) -> list[Taken]:
+        """The candidates of fresh half-edges ``keys`` (built again where not at hand)."""
+        out: dict = {}
+        for key in keys:
+            h = self._hot.pop(key, None)
+            if h is not None and h[0] == self._versions[key[0]]:
+                out[key] = h[1]
+        missing = [k for k in keys if k not in out]
+        for key, cand in zip(missing, build_candidates(self.plan, missing, self._bins)):
+            if cand is None:
+                raise ValueError(f"the collapse {key} is not admissible")
+            out[key] = cand
+        return [Taken(out[k]) for k in keys]
+
+    def apply(self, candidate: CollapseCandidate) -> SurfaceChange:
+        """Collapses ``candidate`` on the complex and writes its local plan,
+        solved again by HiGHS (the exact optimum of the stencil), over the
+        target's closed star; returns the :class:`SurfaceChange`.
+
+        Raises:
+          RuntimeError: HiGHS does not solve the stencil (not expected: a
+            stencil with a vertex bin is always feasible).
+        """
+        plan, c = self.plan, self.plan.complex
+        s, t, st = candidate.source, candidate.target, candidate.stencil
+        sol = solve_member(st.lp)
+        if sol.status != CONVERGED:
+            raise RuntimeError(f"HiGHS could not solve the collapse ({s}, {t}): status {sol.status}")
+        written = plan.sparsified(st, sol.plan)
+        ring = c.neighbors(s)
+        change = c.collapse(s, t)
+        for f in candidate.removed:
+            plan.drop_facet(f)
+        plan.vertex_entries.pop(s, None)
+        plan.bins.update({f: b for f, b in candidate.new_bins.items() if f in c.triangles})
+        plan.assign(st, written)
+        dirty = self._bump(t, s)
+        delta = float(np.sum(written * st.lp.cost)) - st.cost
+        return SurfaceChange(s, t, frozenset(dirty), ring, delta, change)
+
+    def _bump(self, target: int, source: int) -> set[int]:
+        """Bumps the versions of every vertex whose half-edges' stencils the
+        collapse changed, returns the live ones.
+
+        The entries changed on the target's closed star ``Z``; a half-edge's
+        stencil holds the vertices within one edge of its ends and their
+        facets, so it changed if an end is within one edge of ``Z``: every
+        half-edge leaving a vertex within two edges of ``Z`` is stale.
+        """
+        c = self.plan.complex
+        near = {target, *c.neighbors(target)}
+        for _ in range(2):
+            near |= {w for v in near for w in c.neighbors(v)}
+        for v in near | {source}:
+            self._versions[v] += 1
+        return near
+
+    # ------------------------------------------------------------ moves (a seam)
+    def movable(self, v: int) -> bool:
+        """No vertex moves yet (relocation plugs in here)."""
+        return False
+
+    def propose_moves(self, vertices) -> list:
+        """``[(vertex, delta, scored)]`` of vertex moves: none yet."""
+        return []
+
+    def forget_bins(self, vertices) -> None:
+        """Drops cached bins of facets touching ``vertices`` (for a move)."""
+        moved = set(vertices)
+        self._bins = {f: b for f, b in self._bins.items() if moved.isdisjoint(f)}
+
+    # ------------------------------------------------------------ research API
+    def total_cost(self) -> float:
+        """The plan's cost, recomputed from every entry."""
+        return self.plan.total_cost()
