@@ -1,0 +1,287 @@
+"""The result of a surface reconstruction: arrays, density filtering, files, a picture.
+
+The JSON layout is DESIGN.md's "Surface result JSON" plus the vertex
+masses, described by the JSON Schema shipped next to this module
+(``surface_result.schema.json``, :func:`json_schema`). The schema checks
+types; :meth:`SurfaceResult.from_dict` also checks what a schema cannot
+(index ranges, matching lengths, densities that match the masses).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import numbers
+from dataclasses import dataclass
+from importlib import resources
+from pathlib import Path
+
+import numpy as np
+
+from otjax.io import check_output_paths, write_files
+from otjax.surfaces import export
+from otjax.surfaces.filtering import check_threshold, facet_density, filter_facets
+
+SAVE_EXTENSIONS = (".json",) + export.MESH_EXTENSIONS
+JSON_KEYS = ("vertices", "triangles", "edges", "isolated", "vertex_mass", "triangle_mass", "triangle_density",
+             "total_cost", "params", "seconds")
+
+
+def json_schema() -> dict:
+    """The JSON Schema (draft 2020-12) of :meth:`SurfaceResult.to_dict`."""
+    text = resources.files("otjax.surfaces").joinpath("surface_result.schema.json").read_text(encoding="utf-8")
+    return json.loads(text)
+
+
+def _floats(value, name: str, shape: tuple) -> np.ndarray:
+    """A finite float64 array of ``shape`` (``-1``: any length)."""
+    arr = np.asarray([] if value is None else value)
+    if arr.size and arr.dtype.kind not in "iuf":
+        raise ValueError(f"{name} must be an array of numbers, got dtype {arr.dtype}")
+    arr = arr.astype(np.float64)
+    if arr.size == 0:
+        arr = arr.reshape([0 if s == -1 else s for s in shape])
+    if arr.ndim != len(shape) or any(s not in (-1, a) for s, a in zip(shape, arr.shape)):
+        want = "(" + ", ".join("n" if s == -1 else str(s) for s in shape) + ("," if len(shape) == 1 else "") + ")"
+        raise ValueError(f"{name} must have shape {want}, got shape {arr.shape}")
+    if not np.isfinite(arr).all():
+        raise ValueError(f"{name} contains NaN or inf")
+    return arr
+
+
+def _indices(value, name: str, shape: tuple, n: int) -> np.ndarray:
+    arr = np.asarray([] if value is None else value)
+    if arr.size and arr.dtype.kind not in "iu":
+        raise ValueError(f"{name} must hold integer indices, got dtype {arr.dtype}")
+    arr = _floats(arr, name, shape).astype(np.int64)
+    if arr.size and (arr.min() < 0 or arr.max() >= n):
+        raise ValueError(f"{name} index out of range: indices must be in [0, {n}), got {arr.min()}..{arr.max()}")
+    return arr
+
+
+def _plain(value, where: str):
+    """``value`` as plain JSON types (NumPy scalars and arrays, tuples, paths converted)."""
+    if isinstance(value, np.ndarray):
+        return _plain(value.tolist(), where)
+    if isinstance(value, np.generic):
+        return _plain(value.item(), where)
+    if value is None or isinstance(value, (bool, str)):
+        return value
+    if isinstance(value, numbers.Integral):
+        return int(value)
+    if isinstance(value, numbers.Real):
+        if not math.isfinite(value):
+            raise ValueError(f"{where} is {value}, which JSON cannot hold")
+        return float(value)
+    if isinstance(value, Path):
+        return str(value)
+    if isinstance(value, dict):
+        return {str(k): _plain(v, f"{where}[{k!r}]") for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_plain(v, f"{where}[{i}]") for i, v in enumerate(value)]
+    raise ValueError(f"{where} of type {type(value).__name__} is not JSON-serialisable")
+
+
+@dataclass(eq=False)
+class SurfaceResult:
+    """A reconstructed surface: a complex of triangles, dangling edges and isolated vertices.
+
+    Attributes:
+      vertices: ``(V, 3)`` float64 positions.
+      triangles: ``(T, 3)`` int64 facets, rows into ``vertices``.
+      edges: ``(E, 2)`` int64 dangling edges (of no facet).
+      isolated: ``(I,)`` int64 vertices of no facet or edge that carry mass.
+      triangle_mass: ``(T,)`` mass transported onto each facet, ``>= 0``.
+      vertex_mass: ``(V,)`` mass transported onto each vertex (``>= 0``), or
+        ``None`` when not known.
+      total_cost: squared W2 transport cost of the input onto the complex.
+      params: the parameters used (JSON-serialisable values).
+      seconds: wall time of the reconstruction.
+      points, masses: ``(n, 3)`` and ``(n,)`` input, or ``None``; for plots, not saved.
+      stats: anything else about the run; not saved.
+
+    Derived on construction: ``triangle_area``, ``triangle_density``
+    (``mass / area``) and ``density`` (the :class:`~otjax.surfaces.filtering.FacetDensity`,
+    with the sorted relative densities a threshold slider needs).
+
+    Example:
+      >>> r = SurfaceResult(vertices=np.eye(3), triangles=[[0, 1, 2]], triangle_mass=[2.0])
+      >>> SurfaceResult.from_dict(r.to_dict()).triangles.tolist()
+      [[0, 1, 2]]
+    """
+
+    vertices: np.ndarray
+    triangles: np.ndarray
+    triangle_mass: np.ndarray
+    edges: np.ndarray | None = None
+    isolated: np.ndarray | None = None
+    vertex_mass: np.ndarray | None = None
+    total_cost: float = 0.0
+    params: dict | None = None
+    seconds: float = 0.0
+    points: np.ndarray | None = None
+    masses: np.ndarray | None = None
+    stats: object = None
+
+    def __post_init__(self):
+        self.vertices = _floats(self.vertices, "vertices", (-1, 3))
+        n = len(self.vertices)
+        self.triangles = _indices(self.triangles, "triangles", (-1, 3), n)
+        if self.triangles.size and np.any(np.diff(np.sort(self.triangles, axis=1), axis=1) == 0):
+            raise ValueError("triangles must have three different vertices")
+        self.edges = _indices(self.edges, "edges", (-1, 2), n)
+        if self.edges.size and np.any(self.edges[:, 0] == self.edges[:, 1]):
+            raise ValueError("edges must join two different vertices")
+        self.isolated = _indices(self.isolated, "isolated", (-1,), n)
+        self.triangle_mass = _floats(self.triangle_mass, "triangle_mass", (len(self.triangles),))
+        if self.vertex_mass is not None:
+            self.vertex_mass = _floats(self.vertex_mass, "vertex_mass", (n,))
+        for name in ("triangle_mass", "vertex_mass"):
+            value = getattr(self, name)
+            if value is not None and np.any(value < 0):
+                raise ValueError(f"{name} must be >= 0")
+        for name in ("total_cost", "seconds"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, numbers.Real) or not math.isfinite(value) or value < 0:
+                raise ValueError(f"{name} must be a finite number >= 0, got {value!r}")
+            setattr(self, name, float(value))
+        self.params = {} if self.params is None else self.params
+        if not isinstance(self.params, dict):
+            raise ValueError(f"params must be a dict, got {type(self.params).__name__}")  # noqa: TRY004
+        if self.points is not None:
+            self.points = _floats(self.points, "points", (-1, 3))
+        if self.masses is not None:
+            self.masses = _floats(self.masses, "masses", (-1 if self.points is None else len(self.points),))
+        self.density = facet_density(self.vertices, self.triangles, self.triangle_mass)
+        self.triangle_area = self.density.area
+        self.triangle_density = self.density.density
+
+    @classmethod
+    def from_arrays(cls, vertices, triangles, triangle_mass, **fields) -> SurfaceResult:
+        """The result of plain arrays; ``fields`` are the other attributes by name.
+
+        Example:
+          >>> SurfaceResult.from_arrays(np.eye(3), [[0, 1, 2]], [1.0], total_cost=0.5).total_cost
+          0.5
+        """
+        return cls(vertices=vertices, triangles=triangles, triangle_mass=triangle_mass, **fields)
+
+    # --- filtering ----------------------------------------------------------
+
+    @property
+    def sorted_density(self) -> np.ndarray:
+        """``(T,)`` relative facet densities, decreasing: the thresholds of :meth:`filtered`."""
+        return self.density.sorted
+
+    def filtered(self, threshold: float) -> SurfaceResult:
+        """A copy keeping the facets of relative density ``>= threshold``
+        (:mod:`otjax.surfaces.filtering`: a multiple of the mean density; what
+        happens to edges and vertices is described there)."""
+        threshold = check_threshold(threshold)
+        f = filter_facets(self.vertices, self.triangles, self.triangle_mass, threshold, self.edges, self.isolated,
+                          self.vertex_mass)
+        keep_v = f.vertex_index >= 0
+        return SurfaceResult(
+            vertices=f.vertices, triangles=f.triangles, triangle_mass=self.triangle_mass[f.triangle_keep],
+            edges=f.edges, isolated=f.isolated,
+            vertex_mass=None if self.vertex_mass is None else self.vertex_mass[keep_v],
+            total_cost=self.total_cost, params={**self.params, "threshold": threshold}, seconds=self.seconds,
+            points=self.points, masses=self.masses, stats=self.stats)
+
+    # --- JSON -------------------------------------------------------------
+
+    def to_dict(self) -> dict:
+        """The JSON layout (module doc), with plain Python lists, ints and floats."""
+        return {
+            "vertices": self.vertices.tolist(), "triangles": self.triangles.tolist(), "edges": self.edges.tolist(),
+            "isolated": self.isolated.tolist(),
+            "vertex_mass": None if self.vertex_mass is None else self.vertex_mass.tolist(),
+            "triangle_mass": self.triangle_mass.tolist(), "triangle_density": self.triangle_density.tolist(),
+            "total_cost": self.total_cost, "params": _plain(self.params, "params"), "seconds": self.seconds,
+        }
+
+    def to_json(self, indent: int | None = None) -> str:
+        """:meth:`to_dict` as strict JSON (no NaN or inf)."""
+        return json.dumps(self.to_dict(), indent=indent, allow_nan=False)
+
+    @classmethod
+    def from_dict(cls, d: dict) -> SurfaceResult:
+        """A result from :meth:`to_dict`'s layout, checked.
+
+        Raises:
+          ValueError: a key missing or unknown, a wrong type or shape, an index
+            out of range, lengths that differ, densities that do not match
+            ``triangle_mass / area``.
+        """
+        if not isinstance(d, dict):
+            raise ValueError(f"a surface result must be a JSON object, got {type(d).__name__}")  # noqa: TRY004
+        missing = [k for k in JSON_KEYS if k not in d]
+        if missing:
+            raise ValueError(f"surface result is missing key(s): {', '.join(missing)}")
+        unknown = sorted(set(d) - set(JSON_KEYS))
+        if unknown:
+            raise ValueError(f"surface result has unknown key(s): {', '.join(map(str, unknown))}")
+        result = cls(**{k: d[k] for k in JSON_KEYS if k != "triangle_density"})
+        stored = _floats(d["triangle_density"], "triangle_density", (len(result.triangles),))
+        if not np.allclose(stored, result.triangle_density, rtol=1e-9, atol=0):
+            raise ValueError("triangle_density does not match triangle_mass / triangle area")
+        return result
+
+    @classmethod
+    def load(cls, path) -> SurfaceResult:
+        """Reads a result saved as ``.json``; ``ValueError`` naming the file if unreadable or malformed."""
+        try:
+            text = Path(path).read_text(encoding="utf-8")
+        except OSError as err:
+            raise ValueError(f"cannot read {path}: {err.strerror or err}") from None
+        except UnicodeDecodeError:
+            raise ValueError(f"{path}: not a UTF-8 text file") from None
+        try:
+            return cls.from_dict(json.loads(text))
+        except json.JSONDecodeError as err:
+            raise ValueError(f"{path}: not valid JSON ({err})") from None
+        except ValueError as err:
+            raise ValueError(f"{path}: {err}") from None
+
+    # --- files ------------------------------------------------------------
+
+    def render(self, path) -> str | bytes:
+        """The content of a file at ``path`` (by extension: ``.json``, ``.ply``, ``.obj``, ``.off``)."""
+        ext = Path(path).suffix.lower()
+        if ext == ".json":
+            return self.to_json(indent=1) + "\n"
+        if ext == ".ply":
+            return export.to_ply(self.vertices, self.triangles, self.edges, self.triangle_mass,
+                                 self.triangle_density, self.vertex_mass)
+        if ext == ".obj":
+            return export.to_obj(self.vertices, self.triangles, self.edges, self.isolated)
+        if ext == ".off":
+            return export.to_off(self.vertices, self.triangles)
+        raise ValueError(f"{path}: unknown output extension {ext!r}; expected one of {', '.join(SAVE_EXTENSIONS)}")
+
+    def save(self, *paths, mkdir: bool = False) -> None:
+        """Writes the result to one or more files, all or nothing.
+
+        Every path is checked first (extension, directory, no path twice;
+        :func:`otjax.io.check_output_paths`), every file is made in memory,
+        then all are written atomically (:func:`otjax.io.write_files`): a bad
+        path or a failure leaves nothing new on disk.
+
+        Example:
+          >>> result.save("out.json", "out.ply")  # doctest: +SKIP
+        """
+        checked = check_output_paths(paths, SAVE_EXTENSIONS, mkdir=mkdir)
+        write_files([(p, self.render(p)) for p in checked], mkdir=mkdir)
+
+    def plot(self, ax=None, *, show_points: bool = True, plan=None, highlight=None):
+        """Draws the result on 3D axes (:func:`otjax.surfaces.plot.plot_complex`), facets
+        coloured by density; returns the axes."""
+        from otjax.surfaces.plot import plot_complex
+
+        return plot_complex(self.vertices, self.triangles, self.edges, self.isolated, density=self.triangle_density,
+                            points=self.points if show_points else None, plan=plan, highlight=highlight, ax=ax)
+
+    def summary(self) -> str:
+        """One line: counts, cost and time."""
+        return (f"{len(self.vertices)} vertices, {len(self.triangles)} triangles, {len(self.edges)} edges, "
+                f"{len(self.isolated)} isolated, total cost (W2^2) {self.total_cost:.6g}, {self.seconds:.2f} s")
