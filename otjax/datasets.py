@@ -432,8 +432,28 @@ def load_example(name: str, seed: int = 0, n: int | None = None) -> LoadedExampl
 
 
 # The 3D surfaces live in otjax.datasets3d (this module holds the 2D shapes); re-exported here.
-from otjax.datasets3d import (  # noqa: E402
-    RECOVERY, SURFACES, RecoverySample, SurfaceSample, SurfaceTruth, box_pair, box_pair_truth, cone, cone_truth,
-    crossing, crossing_truth, cube, cube_truth, cylinder, cylinder_truth, holed_square, holed_square_truth,
-    outlier_box, rounded_box, rounded_cube_mesh, sample_surface, staircase, staircase_truth,
+from otjax.datasets3d import (  # noqa: F401
+    RECOVERY,
+    SURFACES,
+    RecoverySample,
+    SurfaceSample,
+    SurfaceTruth,
+    box_pair,
+    box_pair_truth,
+    cone,
+    cone_truth,
+    crossing,
+    crossing_truth,
+    cube,
+    cube_truth,
+    cylinder,
+    cylinder_truth,
+    holed_square,
+    holed_square_truth,
+    outlier_box,
+    rounded_box,
+    rounded_cube_mesh,
+    sample_surface,
+    staircase,
+    staircase_truth,
 )

@@ -237,7 +237,7 @@ def staircase_truth(steps: int = 3) -> SurfaceTruth:
     for k in range(steps):
         profile += [(k * s, (k + 1) * s), ((k + 1) * s, (k + 1) * s)]
     profile = np.array([(x, 0.0, z) for x, z in profile])  # (2 steps + 1, 3) at y = 0
-    rects = [_rect(a, ey, b - a) for a, b in zip(profile[:-1], profile[1:])]
+    rects = [_rect(profile[k], ey, profile[k + 1] - profile[k]) for k in range(len(profile) - 1)]
     creases = np.stack([profile[1:-1], profile[1:-1] + ey], 1)
     sides = [np.stack([profile[:-1] + y, profile[1:] + y], 1) for y in (0 * ey, ey)]
     ends = np.stack([profile[[0, -1]], profile[[0, -1]] + ey], 1)

@@ -1,5 +1,8 @@
 """Distances between a reconstruction and its ground truth.
 
+This module measures curves; surfaces (Chamfer, Hausdorff, crease and
+boundary errors of a complex) are measured by :mod:`otjax.metrics3d`.
+
 Everything here is plain NumPy on segment sets, shaped ``(s, 2, d)`` (segment,
 endpoint, coordinate; ``d = 2`` for curves). Lengths come back in the units of
 the inputs: to report a percentage of the shape's size, divide by

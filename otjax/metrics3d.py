@@ -47,7 +47,7 @@ def _indices(x, width: int, n: int, name: str) -> np.ndarray:
     if x.size == 0:
         return np.zeros((0, width) if width else 0, np.int64)
     if x.dtype.kind not in "iu" or (x.ndim != 2 or x.shape[1] != width if width else x.ndim != 1):
-        raise ValueError(f"{name} must be an integer array of shape {'(m, %d)' % width if width else '(m,)'}")
+        raise ValueError(f"{name} must be an integer array of shape {f'(m, {width})' if width else '(m,)'}")
     if x.min() < 0 or x.max() >= n:
         raise ValueError(f"{name} index out of range: indices must be in [0, {n}), got {x.min()}..{x.max()}")
     return x.astype(np.int64)

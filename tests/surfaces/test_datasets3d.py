@@ -115,7 +115,7 @@ def test_flat_shape_gets_an_outlier_slab():
     assert box[1, 2] - box[0, 2] == pytest.approx(0.2 * truth.diagonal)
 
 
-@pytest.mark.parametrize("bad", [dict(n=0), dict(n=2.5), dict(noise=-0.1), dict(noise=np.nan), dict(n_outliers=-1)])
+@pytest.mark.parametrize("bad", [{"n": 0}, {"n": 2.5}, {"noise": -0.1}, {"noise": np.nan}, {"n_outliers": -1}])
 def test_bad_arguments_are_value_errors(bad):
     with pytest.raises(ValueError, match=next(iter(bad))):
         datasets3d.cube(**{"n": 10, **bad})

@@ -26,9 +26,9 @@ def cube_result(**fields):
     vertices = np.concatenate([m.vertices, [[2.0, 2.0, 2.0], [3.0, 2.0, 2.0], [0.1, 0.2, 0.3]]])
     mass = np.linspace(1.0, 2.0, 12)
     mass[[0, 5]] = 0.01
-    base = dict(vertices=vertices, triangles=m.triangles, triangle_mass=mass, edges=[[8, 9]], isolated=[10],
-                vertex_mass=np.r_[np.zeros(8), 0.0, 0.0, 0.5], total_cost=0.125,
-                params={"n_vertices": np.int64(11), "name": "cube", "tol": np.float32(0.5)}, seconds=1.5)
+    base = {"vertices": vertices, "triangles": m.triangles, "triangle_mass": mass, "edges": [[8, 9]],
+            "isolated": [10], "vertex_mass": np.r_[np.zeros(8), 0.0, 0.0, 0.5], "total_cost": 0.125,
+            "params": {"n_vertices": np.int64(11), "name": "cube", "tol": np.float32(0.5)}, "seconds": 1.5}
     return SurfaceResult.from_arrays(**{**base, **fields})
 
 
