@@ -13,19 +13,34 @@ simplicial complex, for research code and notebooks.
   ``"batched"`` JAX Newton, ``"auto"``) behind one call.
 - :func:`initial_complex` -- 3D Delaunay of a random subset, relaxation,
   facets with mass (§4.1).
+- :func:`relocate`, :func:`relocation_targets`, :func:`refine` -- vertex
+  relocation (§4.3): closed-form targets with the plan fixed, damped moves
+  with local re-solves, gradient refinement.
+- :func:`filter_facets`, :func:`facet_density` -- facet filtering by mass
+  density (§4.4).
+- :class:`SurfaceResult` -- a reconstructed surface: arrays, densities,
+  ``.save()`` (``.ply``, ``.obj``, ``.off``, ``.json``), ``.plot()``.
+- :func:`plot_complex` -- a matplotlib 3D view of points, the complex
+  coloured by density and the transport plan.
 
 The LP layer itself (padded batches, solvers, statuses) is :mod:`otjax.lp`.
 """
 
 from otjax.surfaces.bins import FacetBins, bin_positions, facet_bins
 from otjax.surfaces.complex import CollapseChange, ComplexArrays, LocalComplex, SimplicialComplex
+from otjax.surfaces.filtering import FacetDensity, FilteredComplex, facet_density, filter_facets
 from otjax.surfaces.initial_complex import InitialComplex, initial_complex, initial_settings
 from otjax.surfaces.plan import BinSettings, Stencil, SurfacePlan
+from otjax.surfaces.plot import plan_segments, plot_complex
 from otjax.surfaces.relaxation import LocalSolution, RelaxationStats, facet_ring, relax
+from otjax.surfaces.relocation import RefineStats, RelocationStats, refine, relocate, relocation_targets
+from otjax.surfaces.result import SurfaceResult
 from otjax.surfaces.solvers import LocalSolver, exact_solver
 
 __all__ = [
-    "BinSettings", "CollapseChange", "ComplexArrays", "FacetBins", "InitialComplex", "LocalComplex",
-    "LocalSolution", "LocalSolver", "RelaxationStats", "SimplicialComplex", "Stencil", "SurfacePlan",
-    "bin_positions", "exact_solver", "facet_bins", "facet_ring", "initial_complex", "initial_settings", "relax",
+    "BinSettings", "CollapseChange", "ComplexArrays", "FacetBins", "FacetDensity", "FilteredComplex",
+    "InitialComplex", "LocalComplex", "LocalSolution", "LocalSolver", "RefineStats", "RelaxationStats",
+    "RelocationStats", "SimplicialComplex", "Stencil", "SurfacePlan", "SurfaceResult", "bin_positions",
+    "exact_solver", "facet_bins", "facet_density", "facet_ring", "filter_facets", "initial_complex",
+    "initial_settings", "plan_segments", "plot_complex", "refine", "relax", "relocate", "relocation_targets",
 ]

@@ -19,10 +19,10 @@ from pathlib import Path
 import numpy as np
 
 from otjax.io import check_output_paths, write_files
-from otjax.surfaces import export
+from otjax.surfaces import mesh_files
 from otjax.surfaces.filtering import check_threshold, facet_density, filter_facets
 
-SAVE_EXTENSIONS = (".json",) + export.MESH_EXTENSIONS
+SAVE_EXTENSIONS = (".json",) + mesh_files.MESH_EXTENSIONS
 JSON_KEYS = ("vertices", "triangles", "edges", "isolated", "vertex_mass", "triangle_mass", "triangle_density",
              "total_cost", "params", "seconds")
 
@@ -251,12 +251,12 @@ class SurfaceResult:
         if ext == ".json":
             return self.to_json(indent=1) + "\n"
         if ext == ".ply":
-            return export.to_ply(self.vertices, self.triangles, self.edges, self.triangle_mass,
+            return mesh_files.to_ply(self.vertices, self.triangles, self.edges, self.triangle_mass,
                                  self.triangle_density, self.vertex_mass)
         if ext == ".obj":
-            return export.to_obj(self.vertices, self.triangles, self.edges, self.isolated)
+            return mesh_files.to_obj(self.vertices, self.triangles, self.edges, self.isolated)
         if ext == ".off":
-            return export.to_off(self.vertices, self.triangles)
+            return mesh_files.to_off(self.vertices, self.triangles)
         raise ValueError(f"{path}: unknown output extension {ext!r}; expected one of {', '.join(SAVE_EXTENSIONS)}")
 
     def save(self, *paths, mkdir: bool = False) -> None:
