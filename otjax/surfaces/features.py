@@ -1,0 +1,350 @@
+"""Feature recovery (Digne et al. 2014, §5, Algorithm 4) without remeshing.
+
+A smooth mesh (e.g. a screened Poisson reconstruction) rounds the creases of
+the points it was made from and covers their holes. Recovery keeps its
+connectivity and pulls its vertices onto the points' features:
+
+1. the input is validated (:func:`validate_input`) and moved to the canonical
+   frame (:mod:`otjax.frame`), where everything is computed;
+2. bins are sampled on the mesh's facets, every point goes to its nearest
+   vertex and the plan is relaxed to a local minimum (§3.3);
+3. ``passes`` times, every vertex moves half way to its relocation target
+   (§4.3) and the transport on its closed star is re-solved
+   (:func:`otjax.surfaces.relocation.relocate`, one round); the order of the
+   vertices is a fresh permutation each pass (the paper suggests it, to avoid
+   a bias from a fixed order);
+4. the facets are filtered by mass density (§4.4,
+   :mod:`otjax.surfaces.filtering`): a facet over a hole receives little mass.
+
+Batching. The paper handles one vertex after the other. Two vertices whose
+closed stars share no vertex touch disjoint parts of the plan, so their
+moves and re-solves commute: ``order="colouring"`` splits each pass's
+permutation into colour classes of such vertices (a greedy distance-2
+colouring, :func:`star_colouring`) and relocates a class with one solver
+call. ``order="sequential"`` keeps the paper's one vertex at a time.
+
+Relocation keeps a move only if its star's cost does not rise, so the plan's
+total cost never rises over a pass.
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+from typing import NamedTuple
+
+import jax
+import numpy as np
+import scipy.sparse
+import scipy.spatial
+
+from otjax.frame import Frame, to_canonical
+from otjax.surfaces.complex import SimplicialComplex, triangle_key
+from otjax.surfaces.filtering import check_threshold, facet_density, keep_facets
+from otjax.surfaces.plan import BinSettings, SurfacePlan
+from otjax.surfaces.relaxation import RelaxationStats, relax
+from otjax.surfaces.relocation import relocate
+from otjax.surfaces.solvers import LocalSolver
+from otjax.validation import _as_float_array, check_points
+
+#: Default relative density (a multiple of the mean facet density) below which
+#: a facet is dropped (docs/decisions.md#feature_recovery).
+DENSITY_THRESHOLD = 0.1
+#: Passes over the vertices (docs/decisions.md#feature_recovery).
+PASSES = 3
+#: Points and mesh whose bounding-box diagonals differ by more than this
+#: factor are at different scales (e.g. millimetres against metres).
+SCALE_RATIO = 4.0
+#: Points are far from the mesh when their median distance to the nearest
+#: vertex exceeds this share of the mesh's diagonal plus its median edge length.
+FAR = 0.1
+#: A face whose area is below this share of its longest edge squared is degenerate.
+MIN_FACE_ASPECT = 1e-12
+
+
+class PassStats(NamedTuple):
+    """One pass over the vertices.
+
+    Attributes:
+      cost_before, cost_after: the plan's total cost (user units) around the pass.
+      accepted: moves kept; rejected: moves undone (the star's cost rose);
+      degenerate: moves not made (a facet would degenerate).
+      solves: local LPs solved; calls: solver calls (colour classes, or vertices).
+      seconds: wall time.
+    """
+
+    cost_before: float
+    cost_after: float
+    accepted: int
+    rejected: int
+    degenerate: int
+    solves: int
+    calls: int
+    seconds: float
+
+
+class FeatureRecovery(NamedTuple):
+    """What :func:`recover_features` returns (user units throughout, except ``plan``).
+
+    Attributes:
+      vertices: ``(V, 3)`` float64 the moved vertices (every input row).
+      triangles: ``(T', 3)`` int64 the input faces kept by the filter, as given.
+      keep: ``(T,)`` bool which input faces are kept.
+      triangle_mass: ``(T,)`` float64 mass transported onto each input face,
+        plus its share of its corners' mass (:func:`facet_masses`).
+      density: ``(T,)`` float64 relative mass density of each face
+        (:func:`otjax.surfaces.filtering.facet_density`; 1 is the mean).
+      sorted_density: ``(T,)`` the relative densities, decreasing: the
+        thresholds at which the kept set changes.
+      cost_before: total transport cost of the relaxed plan before relocation.
+      cost_after: total transport cost after the last pass.
+      passes: one :class:`PassStats` per pass.
+      relaxation: the initial relaxation's :class:`RelaxationStats` (canonical units).
+      plan: the final :class:`SurfacePlan`, in the canonical frame (``frame``).
+      frame: the :class:`~otjax.frame.Frame` of the computation.
+    """
+
+    vertices: np.ndarray
+    triangles: np.ndarray
+    keep: np.ndarray
+    triangle_mass: np.ndarray
+    density: np.ndarray
+    sorted_density: np.ndarray
+    cost_before: float
+    cost_after: float
+    passes: tuple[PassStats, ...]
+    relaxation: RelaxationStats
+    plan: SurfacePlan
+    frame: Frame
+
+
+class CheckedInput(NamedTuple):
+    """Validated input: ``points (N, 3)``, ``masses (N,)``, ``vertices (V, 3)``, ``triangles (T, 3)``."""
+
+    points: np.ndarray
+    masses: np.ndarray
+    vertices: np.ndarray
+    triangles: np.ndarray
+
+
+# ---------------------------------------------------------------- validation
+def check_mesh(vertices, triangles) -> tuple[np.ndarray, np.ndarray]:
+    """``(vertices (V, 3) float64, triangles (T, 3) int64)`` of a valid mesh.
+
+    Raises:
+      ValueError: wrong shapes, non-finite vertices, no faces, non-integer or
+        out-of-range indices, a face repeating a vertex, a face of zero area,
+        or the same face twice.
+    """
+    v = _as_float_array(vertices, "vertices")
+    if v.ndim != 2 or v.shape[1] != 3:
+        raise ValueError(f"vertices must have shape (V, 3), got {v.shape}")
+    if not np.all(np.isfinite(v)):
+        raise ValueError(f"vertices must be finite: row {int(np.flatnonzero(~np.isfinite(v).all(1))[0])} is not")
+    t = np.asarray(triangles)
+    if t.size == 0:
+        raise ValueError("the mesh has no faces: feature recovery moves the vertices of a triangle mesh")
+    if t.ndim != 2 or t.shape[1] != 3:
+        raise ValueError(f"triangles must have shape (T, 3), got {t.shape}")
+    if t.dtype.kind == "f" and np.all(np.isfinite(t)) and np.all(t == np.round(t)):
+        t = t.astype(np.int64)  # whole numbers read from a text file
+    if t.dtype.kind not in "iu":
+        raise ValueError(f"triangles must hold integer vertex indices, got dtype {t.dtype}")
+    t = t.astype(np.int64)
+    bad = np.flatnonzero(np.any((t < 0) | (t >= len(v)), axis=1))
+    if len(bad):
+        raise ValueError(f"face {int(bad[0])} {t[bad[0]].tolist()} indexes outside the {len(v)} vertices")
+    s = np.sort(t, axis=1)
+    bad = np.flatnonzero(np.any(s[:, 1:] == s[:, :-1], axis=1))
+    if len(bad):
+        raise ValueError(f"face {int(bad[0])} {t[bad[0]].tolist()} repeats a vertex (degenerate face)")
+    c = v[t]
+    area2 = np.linalg.norm(np.cross(c[:, 1] - c[:, 0], c[:, 2] - c[:, 0]), axis=1)
+    longest = np.max(np.sum((c - np.roll(c, 1, axis=1)) ** 2, axis=2), axis=1)
+    bad = np.flatnonzero(~(area2 > MIN_FACE_ASPECT * longest))
+    if len(bad):
+        raise ValueError(f"face {int(bad[0])} {t[bad[0]].tolist()} has zero area (degenerate face)")
+    _, first, count = np.unique(s, axis=0, return_index=True, return_counts=True)
+    if np.any(count > 1):
+        row = s[first[np.flatnonzero(count > 1)[0]]]
+        raise ValueError(f"face {row.tolist()} appears more than once")
+    return v, t
+
+
+def check_placement(points: np.ndarray, vertices: np.ndarray, triangles: np.ndarray) -> None:
+    """Raises ValueError if the points are at another scale than the mesh
+    (:data:`SCALE_RATIO`) or far from it (:data:`FAR`)."""
+    used = vertices[np.unique(triangles)]
+    d_mesh = float(np.linalg.norm(np.ptp(used, axis=0)))
+    d_points = float(np.linalg.norm(np.ptp(points, axis=0)))
+    ratio = d_points / d_mesh
+    if not 1 / SCALE_RATIO <= ratio <= SCALE_RATIO:
+        raise ValueError(
+            f"the points and the mesh are at different scales: bounding-box diagonals {d_points:.4g} and "
+            f"{d_mesh:.4g} (ratio {ratio:.3g}, more than {SCALE_RATIO:g}); are they in the same units?")
+    edges = vertices[triangles] - vertices[np.roll(triangles, 1, axis=1)]
+    edge = float(np.median(np.linalg.norm(edges, axis=2)))
+    distance, _ = scipy.spatial.cKDTree(used).query(points)
+    median = float(np.median(distance))
+    if median > FAR * d_mesh + edge:
+        raise ValueError(
+            f"the points are far from the mesh: their median distance to the nearest mesh vertex is {median:.4g}, "
+            f"more than {FAR:g} of the mesh's diagonal plus its median edge ({FAR * d_mesh + edge:.4g}); "
+            "are they in the same coordinate frame?")
+
+
+def validate_input(points, vertices, triangles, masses=None) -> CheckedInput:
+    """Checks everything :func:`recover_features` needs (see its Raises)."""
+    pts = _as_float_array(points, "points")
+    if pts.ndim != 2 or pts.shape[1] != 3:
+        raise ValueError(f"points must have shape (N, 3), got {pts.shape}")
+    pts, m = check_points(pts, masses, dim=3, min_points=4, merge_duplicates=True)
+    v, t = check_mesh(vertices, triangles)
+    check_placement(pts, v, t)
+    return CheckedInput(pts, m, v, t)
+
+
+# ------------------------------------------------------------------ colouring
+def star_colouring(triangles: np.ndarray, n_vertices: int, order: np.ndarray) -> list[np.ndarray]:
+    """Greedy colouring of the vertices ``order`` so that no two of a colour
+    have closed stars sharing a vertex (they are at least 3 edges apart).
+
+    Args:
+      triangles: ``(T, 3)`` int64 faces.
+      n_vertices: ``V``; ids are ``0 .. V-1``.
+      order: ``(K,)`` int64 the vertices to colour, in the order they are
+        coloured (each takes the smallest colour its distance-2 neighbours lack).
+
+    Returns:
+      The colour classes, each ``(k,)`` int64 in the order of ``order``.
+
+    Example:
+      >>> [c.tolist() for c in star_colouring(np.array([[0, 1, 2], [1, 2, 3]]), 5, np.arange(5))]
+      [[0, 4], [1], [2], [3]]
+    """
+    t = np.asarray(triangles, np.int64).reshape(-1, 3)
+    a = np.concatenate([t[:, 0], t[:, 1], t[:, 2], t[:, 1], t[:, 2], t[:, 0]])
+    b = np.concatenate([t[:, 1], t[:, 2], t[:, 0], t[:, 0], t[:, 1], t[:, 2]])
+    ring = scipy.sparse.csr_matrix((np.ones(len(a)), (a, b)), shape=(n_vertices, n_vertices))
+    ring = ring + scipy.sparse.identity(n_vertices, format="csr")
+    two = (ring @ ring).tocsr()  # nonzero where the closed stars share a vertex
+    colour = np.full(n_vertices, -1, np.int64)
+    for v in np.asarray(order, np.int64).tolist():
+        taken = colour[two.indices[two.indptr[v]:two.indptr[v + 1]]]
+        used = np.zeros(len(taken) + 1, bool)
+        used[taken[(taken >= 0) & (taken <= len(taken))]] = True
+        colour[v] = int(np.argmin(used))
+    order = np.asarray(order, np.int64)
+    return [order[colour[order] == k] for k in range(int(colour.max(initial=-1)) + 1)]
+
+
+# --------------------------------------------------------------------- steps
+def initial_plan(frame_vertices: np.ndarray, triangles: np.ndarray, points: np.ndarray, masses: np.ndarray,
+                 solve, seed: int) -> tuple[SurfacePlan, RelaxationStats]:
+    """The relaxed plan of canonical ``points (N, 3)`` onto the mesh (§5): bins
+    on every face, nearest vertex, then :func:`relax` to a local minimum."""
+    settings = BinSettings(diagonal=float(np.linalg.norm(np.ptp(points, axis=0))), seed=seed)
+    plan = SurfacePlan(SimplicialComplex(frame_vertices, triangles), points, masses, settings)
+    return plan, relax(plan, solve, seed=seed)
+
+
+def relocation_pass(plan: SurfacePlan, solve, order: str, rng: np.random.Generator,
+                    triangles: np.ndarray) -> PassStats:
+    """One pass over the plan's vertices in a random order (canonical costs)."""
+    t0 = time.perf_counter()
+    before = plan.total_cost()
+    alive = np.flatnonzero(plan.complex.alive)
+    perm = alive[rng.permutation(len(alive))]
+    groups = (star_colouring(triangles, len(plan.complex.positions), perm) if order == "colouring"
+              else [perm[i:i + 1] for i in range(len(perm))])
+    tally = np.zeros(4, np.int64)
+    for group in groups:
+        s = relocate(plan, group.tolist(), solve, rounds=1)
+        tally += (s.accepted, s.rejected, s.degenerate, s.solves)
+    after = plan.total_cost()
+    return PassStats(before, after, *map(int, tally), len(groups), time.perf_counter() - t0)
+
+
+def facet_masses(plan: SurfacePlan, triangles: np.ndarray) -> np.ndarray:
+    """``(T,)`` mass on each face ``(T, 3)`` of the plan's complex (canonical units),
+    each vertex's own mass shared among its faces in proportion to their areas.
+
+    On a fine mesh (a few points per face) much of the mass sits on vertex
+    bins and a face's own mass is noisy: faces on the surface get none at
+    times. A vertex's mass belongs to the faces around it, so a face over a
+    hole still gets little (its corners carry little), while a face on the
+    surface gets a share of its corners' mass (docs/decisions.md#feature_recovery).
+    """
+    pos = plan.complex.positions
+    c = pos[triangles]
+    area = 0.5 * np.linalg.norm(np.cross(c[:, 1] - c[:, 0], c[:, 2] - c[:, 0]), axis=1)
+    star = np.zeros(len(pos))
+    np.add.at(star, triangles.ravel(), np.repeat(area, 3))
+    vertex = np.array([plan.simplex_mass(v) for v in range(len(pos))], np.float64)
+    own = np.array([plan.simplex_mass(triangle_key(*row)) for row in triangles.tolist()], np.float64)
+    return own + np.sum(vertex[triangles] * area[:, None] / star[triangles], axis=1)
+
+
+# ---------------------------------------------------------------- entry point
+def recover_features(points, vertices, triangles, masses=None, *, passes: int = PASSES,
+                     order: str = "colouring", density_threshold: float = DENSITY_THRESHOLD,
+                     solver: str = "auto", seed: int = 0, progress: bool = False) -> FeatureRecovery:
+    """Pulls a smooth mesh's vertices onto the creases and boundaries of the
+    points, then drops the facets that receive little mass (Algorithm 4).
+
+    Args:
+      points: ``(N, 3)`` the points the mesh was reconstructed from.
+      vertices, triangles: ``(V, 3)`` and ``(T, 3)`` the smooth mesh.
+      masses: ``(N,)`` point masses, default all 1.
+      passes: relocation passes over the vertices (>= 0).
+      order: ``"colouring"`` (classes of vertices with disjoint closed stars,
+        one solver call each) or ``"sequential"`` (one vertex at a time, the paper).
+      density_threshold: relative mass density below which a facet is dropped
+        (``0`` keeps every facet that carries mass).
+      solver: the local LP solver, ``"exact"``, ``"batched"`` or ``"auto"``.
+      seed: seeds the bins, the relaxation and each pass's vertex order.
+      progress: print a line per pass on stderr.
+
+    Returns:
+      :class:`FeatureRecovery`.
+
+    Raises:
+      ValueError: malformed points, masses or mesh (shapes, non-finite values,
+        no faces, indices out of range, degenerate or repeated faces), points
+        at another scale than the mesh or far from it, or a bad option.
+    """
+    if order not in ("colouring", "sequential"):
+        raise ValueError(f"order must be 'colouring' or 'sequential', got {order!r}")
+    if isinstance(passes, bool) or not isinstance(passes, (int, np.integer)) or passes < 0:
+        raise ValueError(f"passes must be an integer >= 0, got {passes!r}")
+    if solver not in ("exact", "batched", "auto"):
+        raise ValueError(f"solver must be 'exact', 'batched' or 'auto', got {solver!r}")
+    threshold = check_threshold(density_threshold)
+    given = validate_input(points, vertices, triangles, masses)
+    frame, q, m = to_canonical(given.points, given.masses)
+    solve = LocalSolver(solver)
+    with jax.enable_x64(True):
+        plan, relaxation = initial_plan(frame.points_in(given.vertices), given.triangles, q, m, solve, seed)
+        stats = []
+        for k in range(passes):
+            s = relocation_pass(plan, solve, order, np.random.default_rng([seed, k]), given.triangles)
+            s = s._replace(cost_before=_cost_out(frame, s.cost_before), cost_after=_cost_out(frame, s.cost_after))
+            stats.append(s)
+            if progress:
+                print(f"pass {k + 1}/{passes}: cost {s.cost_before:.6g} -> {s.cost_after:.6g}, "
+                      f"{s.accepted} moves kept, {s.rejected} undone, {s.calls} solver calls, "
+                      f"{s.seconds:.1f} s", file=sys.stderr)
+    moved = frame.points_out(plan.complex.positions)
+    mass = frame.masses_out(facet_masses(plan, given.triangles))
+    density = facet_density(moved, given.triangles, mass)
+    keep = keep_facets(density.relative, threshold)
+    cost = _cost_out(frame, plan.total_cost())
+    first = stats[0].cost_before if stats else cost
+    return FeatureRecovery(moved, given.triangles[keep], keep, mass, density.relative, density.sorted, first,
+                           cost, tuple(stats), relaxation, plan, frame)
+
+
+def _cost_out(frame: Frame, cost: float) -> float:
+    value, exponent = frame.cost_out(cost)
+    with np.errstate(over="ignore", under="ignore"):
+        return float(np.ldexp(value, exponent))
