@@ -1,0 +1,174 @@
+"""``reconstruct_surface``: the 3D pipeline of Digne et al. 2014 (Algorithm 1).
+
+Points -> canonical frame -> initial complex (Delaunay of a subset, relaxed
+transport, facets with mass; §4.1) -> (re-binned) -> greedy half-edge
+collapses by increase of transport cost (§4.2, the shared loop of
+:mod:`otjax.decimation`) -> arrays in the input's units.
+"""
+
+from __future__ import annotations
+
+import time
+from typing import NamedTuple
+
+import jax
+import numpy as np
+
+from otjax.decimation.loop import QUEUES, DecimationStats, decimate
+from otjax.frame import to_canonical
+from otjax.surfaces.bins import facet_areas
+from otjax.surfaces.complex import SimplicialComplex
+from otjax.surfaces.engine import SurfaceEngine
+from otjax.surfaces.initial_complex import FRACTION, initial_complex
+from otjax.surfaces.plan import BinSettings, Entries, SurfacePlan
+from otjax.surfaces.relaxation import relax
+from otjax.surfaces.solvers import LocalSolver
+from otjax.validation import check_number, check_points, check_target
+
+SOLVERS = ("batched", "exact")
+#: Re-bin the initial complex with the default density before decimating
+#: (docs/decisions.md#surface_rebin).
+REBIN = False
+#: Relaxation sweeps after re-binning.
+REBIN_SWEEPS = 2
+
+
+class SurfaceReconstruction(NamedTuple):
+    """What :func:`reconstruct_surface` returns (input units).
+
+    Attributes:
+      vertices: ``(V, 3)`` float64 live vertex positions.
+      triangles: ``(T, 3)`` int64 rows into ``vertices``.
+      edges: ``(E, 2)`` int64 rows into ``vertices``: the edges in no triangle.
+      isolated: ``(I,)`` int64 rows of vertices in no edge that carry mass.
+      triangle_mass: ``(T,)`` float64 mass transported onto each triangle.
+      triangle_area: ``(T,)`` float64 area of each triangle.
+      total_cost: the plan's transport cost (mass times squared length);
+        the cost is ``total_cost * 2**cost_exponent``.
+      cost_exponent: 0 unless the cost does not fit float64 in input units.
+      plan: the :class:`SurfacePlan` (canonical frame; research use).
+      complex: its :class:`SimplicialComplex` (canonical frame).
+      vertex_ids: ``(V,)`` int64 id of each vertex row in ``complex``.
+      stats: the :class:`DecimationStats`.
+      seconds: wall time of ``initial``, ``rebin``, ``decimation``.
+    """
+
+    vertices: np.ndarray
+    triangles: np.ndarray
+    edges: np.ndarray
+    isolated: np.ndarray
+    triangle_mass: np.ndarray
+    triangle_area: np.ndarray
+    total_cost: float
+    cost_exponent: int
+    plan: SurfacePlan
+    complex: SimplicialComplex
+    vertex_ids: np.ndarray
+    stats: DecimationStats
+    seconds: dict
+
+
+def reconstruct_surface(points, masses=None, n_vertices: int = 100, *, queue: str = "multiple-choice",
+                        choices: int = 40, switch_factor: float = 1.0, seed: int = 0, solver: str = "batched",
+                        fraction: float = FRACTION, rebin: bool = REBIN, max_sweeps: int = 10,
+                        progress: bool = False) -> SurfaceReconstruction:
+    """Reconstructs a surface (triangles, plus edges and isolated vertices) from 3D points.
+
+    Args:
+      points: ``(N, 3)`` finite coordinates (distinct).
+      masses: ``(N,)`` positive masses (default: ones).
+      n_vertices: vertices to keep (``>= 4``, at most the initial complex's).
+      queue: the decimation queue (:data:`otjax.decimation.loop.QUEUES`).
+      choices: half-edges drawn per multiple-choice step (the paper's 40).
+      switch_factor: multiple choice hands over to the exhaustive queue
+        below this many times ``n_vertices`` (1: never, as in the paper).
+      seed: seeds the subset, bins and draws; same seed, same result.
+      solver: ``"batched"`` (JAX batches, HiGHS for members they do not
+        certify) or ``"exact"`` (HiGHS for every local LP).
+      fraction: share of the points in the initial Delaunay (§4.1).
+      rebin: give every facet the default bins before decimating.
+      max_sweeps: relaxation sweeps of the initial complex at most.
+      progress: show a progress bar.
+
+    Returns:
+      :class:`SurfaceReconstruction` in the input's units.
+
+    Raises:
+      ValueError: bad points, masses or parameters, or ``n_vertices`` more
+        than the initial complex has.
+
+    Example:
+      >>> pts = np.random.default_rng(0).random((300, 3)) * [1, 1, 0]  # doctest: +SKIP
+      >>> r = reconstruct_surface(pts, n_vertices=10, solver="exact")  # doctest: +SKIP
+    """
+    t0 = time.perf_counter()
+    points, masses = _checked(points, masses, n_vertices, queue, choices, switch_factor, solver, fraction)
+    if masses is not None and np.any(masses <= 0):
+        raise ValueError(f"masses must be > 0: {int(np.sum(masses <= 0))} are not")
+    frame, q, m = to_canonical(points, masses)
+    method = "auto" if solver == "batched" else "exact"
+    seconds = {}
+    with jax.enable_x64(True):
+        init = initial_complex(q, m, LocalSolver(method), fraction=fraction, seed=seed, max_sweeps=max_sweeps)
+        seconds["initial"] = time.perf_counter() - t0
+        plan = init.plan
+        if plan.complex.n_vertices < n_vertices:
+            raise ValueError(f"n_vertices ({n_vertices}) exceeds the {plan.complex.n_vertices} vertices of the "
+                             "initial complex; lower it or raise fraction")
+        t1 = time.perf_counter()
+        if rebin:
+            plan = rebinned(plan, BinSettings(plan.settings.diagonal, seed=seed), LocalSolver(method))
+        seconds["rebin"] = time.perf_counter() - t1
+        engine = SurfaceEngine(plan, method=method)
+        t2 = time.perf_counter()
+        stats = decimate(engine, n_vertices, queue=queue, choices=choices, switch_factor=switch_factor, seed=seed,
+                         progress=progress)
+        seconds["decimation"] = time.perf_counter() - t2
+    return _result(plan, frame, stats, seconds)
+
+
+def _checked(points, masses, n_vertices, queue, choices, switch_factor, solver, fraction):
+    """Validated ``(points, masses)``; raises on bad parameters."""
+    points, masses = check_points(points, masses, dim=3, min_points=4)
+    check_target(n_vertices, len(points), minimum=4)
+    if queue not in QUEUES:
+        raise ValueError(f"queue must be one of {', '.join(QUEUES)}, got {queue!r}")
+    if solver not in SOLVERS:
+        raise ValueError(f"solver must be one of {', '.join(SOLVERS)}, got {solver!r}")
+    check_number("choices", choices, minimum=1, integer=True)
+    check_number("switch_factor", switch_factor, minimum=1.0)
+    fraction = check_number("fraction", fraction)
+    if not 0 < fraction <= 1:
+        raise ValueError(f"fraction must be in (0, 1], got {fraction}")
+    return points, masses
+
+
+def rebinned(plan: SurfacePlan, settings: BinSettings, solve) -> SurfacePlan:
+    """The plan on the same complex with every facet's bins made by
+    ``settings``: each point's mass on a facet spread over its new bins by
+    capacity (feasible), then relaxed (:data:`REBIN_SWEEPS` sweeps)."""
+    facet_entries = {}
+    new = SurfacePlan.from_entries(plan.complex, plan.points, plan.masses, settings, {}, plan.vertex_entries, {})
+    for f, e in plan.facet_entries.items():
+        cap = new.bins[f].capacity
+        k = len(cap)
+        facet_entries[f] = Entries(np.repeat(e.point, k), np.tile(np.arange(k), len(e.point)),
+                                   np.outer(e.mass, cap).ravel())
+    new.facet_entries = facet_entries
+    relax(new, solve, max_sweeps=REBIN_SWEEPS)
+    return new
+
+
+def _result(plan: SurfacePlan, frame, stats: DecimationStats, seconds: dict) -> SurfaceReconstruction:
+    c = plan.complex
+    arrays = c.to_arrays()
+    keys = [tuple(int(x) for x in arrays.vertex_ids[t]) for t in arrays.triangles]
+    tri_mass = np.array([plan.simplex_mass(k) for k in keys])
+    carried = np.array([plan.simplex_mass(int(arrays.vertex_ids[i])) > 0 for i in arrays.isolated], bool)
+    vertices = frame.points_out(arrays.vertices)
+    cost, exponent = frame.cost_out(plan.total_cost())
+    return SurfaceReconstruction(
+        vertices=vertices, triangles=arrays.triangles, edges=arrays.edges[arrays.dangling],
+        isolated=arrays.isolated[carried], triangle_mass=frame.masses_out(tri_mass),
+        triangle_area=facet_areas(vertices, arrays.triangles), total_cost=cost, cost_exponent=exponent,
+        plan=plan, complex=c, vertex_ids=arrays.vertex_ids, stats=stats, seconds=seconds)

@@ -1,0 +1,79 @@
+"""reconstruct_surface end to end on shapes with a known surface (small, HiGHS)."""
+
+import numpy as np
+import pytest
+
+from otjax.surfaces.reconstruct import SurfaceReconstruction, reconstruct_surface
+from tests.surfaces.shapes import CROSS, CUBE, SQUARE, diagonal, fit
+
+CORNERS = np.array([[x, y, z] for x in (0.0, 1.0) for y in (0.0, 1.0) for z in (0.0, 1.0)])
+
+
+def run(shape, n, n_vertices, seed=0, **kw):
+    pts = shape.sample(n, np.random.default_rng(seed))
+    kw = {"solver": "exact", "choices": 10, "max_sweeps": 3, **kw}
+    return pts, reconstruct_surface(pts, n_vertices=n_vertices, seed=seed, **kw)
+
+
+def test_cube_keeps_its_corners_as_well_as_the_sample_allows_and_fits_the_surface():
+    # Half-edge collapses keep input points: the corners themselves are in the sample.
+    pts = np.r_[CORNERS, CUBE.sample(900, np.random.default_rng(1))]
+    r = reconstruct_surface(pts, n_vertices=30, solver="exact", choices=10, max_sweeps=3, fraction=0.2, seed=1)
+    d = diagonal(pts)
+    assert isinstance(r, SurfaceReconstruction) and len(r.vertices) == 30
+    near = np.min(np.linalg.norm(CORNERS[:, None] - r.vertices[None], axis=2), axis=1) / d
+    assert np.all(near <= 0.06), near
+    f = fit(CUBE, r.vertices, r.triangles, d, samples=4000)
+    assert f.chamfer <= 0.01 and f.coverage >= 0.8, f
+    np.testing.assert_allclose(r.triangle_mass.sum() + sum(r.plan.simplex_mass(int(r.vertex_ids[i]))
+                                                          for i in range(len(r.vertices))),
+                               len(pts), rtol=1e-9)
+    assert np.isfinite(r.total_cost) and r.total_cost > 0 and r.cost_exponent == 0
+    assert np.all(r.triangle_area > 0)
+
+
+def test_open_square_keeps_its_boundary():
+    pts, r = run(SQUARE, 500, 16, seed=2)
+    d = diagonal(pts)
+    f = fit(SQUARE, r.vertices, r.triangles, d, samples=4000)
+    assert f.to_surface <= 0.01 and f.coverage >= 0.9, f
+    # vertices on every side of the square (the boundary is kept, not shrunk)
+    for axis in (0, 1):
+        assert r.vertices[:, axis].min() <= 0.06 and r.vertices[:, axis].max() >= 0.94
+
+
+def test_crossing_planes_keep_both_planes():
+    pts, r = run(CROSS, 700, 24, seed=3)
+    d = diagonal(pts)
+    centres = r.vertices[r.triangles].mean(axis=1)
+    on_z = np.abs(centres[:, 2] - 0.5) < 0.02
+    on_y = np.abs(centres[:, 1] - 0.5) < 0.02
+    area = r.triangle_area
+    assert area[on_z].sum() > 0.6 and area[on_y].sum() > 0.6  # each unit square mostly covered
+    assert fit(CROSS, r.vertices, r.triangles, d, samples=4000).chamfer <= 0.01
+
+
+def test_results_are_in_user_units():
+    pts, r = run(SQUARE, 300, 10, seed=4)
+    scale, shift = 1000.0, np.array([5e3, -2e3, 7.0])
+    r2 = reconstruct_surface(pts * scale + shift, n_vertices=10, solver="exact", choices=10, max_sweeps=3, seed=4)
+    # an exact power of two would be bitwise; 1000 is not, so compare at rounding level
+    np.testing.assert_allclose(r2.vertices, r.vertices * scale + shift, rtol=0, atol=1e-9 * scale)
+    assert r2.total_cost == pytest.approx(r.total_cost * scale**2, rel=1e-6)
+    np.testing.assert_allclose(r2.triangle_area, r.triangle_area * scale**2, rtol=1e-9)
+
+
+@pytest.mark.parametrize("kw, match", [
+    ({"points": np.zeros((10, 2))}, "shape"),
+    ({"points": np.r_[np.random.default_rng(0).random((9, 3)), [[np.nan, 0, 0]]]}, "NaN"),
+    ({"masses": -np.ones(10)}, "masses"),
+    ({"masses": np.r_[np.ones(9), 0.0]}, "masses must be > 0"),
+    ({"n_vertices": 3}, "at least 4"),
+    ({"n_vertices": 11}, "cannot exceed"),
+    ({"solver": "fast"}, "solver"),
+    ({"queue": "lifo"}, "queue"),
+])
+def test_bad_input_is_one_clear_value_error(kw, match):
+    args = {"points": np.random.default_rng(0).random((10, 3)), "masses": None, "n_vertices": 5, **kw}
+    with pytest.raises(ValueError, match=match):
+        reconstruct_surface(args.pop("points"), args.pop("masses"), args.pop("n_vertices"), **args)
