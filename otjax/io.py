@@ -39,7 +39,7 @@ _SEPARATOR = re.compile(r"[,\s]+")
 _EMPTY_FIELD = re.compile(r"^,|,\s*,")
 
 
-def _parse_row(fields: list[str]) -> list[float] | None:
+def parse_row(fields: list[str]) -> list[float] | None:
     """The numbers of a split line, or ``None`` if some field is not a number."""
     try:
         return [float(f) for f in fields]
@@ -47,22 +47,33 @@ def _parse_row(fields: list[str]) -> list[float] | None:
         return None
 
 
-def _read_text(path: Path) -> tuple[np.ndarray, np.ndarray | None]:
+def read_text(path: Path) -> str:
+    """The text of ``path``; a file that is not UTF-8 is a ``ValueError``."""
     try:
-        text = path.read_text(encoding="utf-8-sig")  # a byte order mark (Windows tools) is not data
+        return path.read_text(encoding="utf-8-sig")  # a byte order mark (Windows tools) is not data
     except UnicodeDecodeError:
         raise ValueError(f"{path}: not a UTF-8 text file") from None
+
+
+def read_table(path: Path, text: str, layouts: dict[int, str], header_allowed: bool) -> np.ndarray:
+    """The rows of a text point file as ``(n, c)`` float64, ``c`` a key of ``layouts``.
+
+    Fields are separated by commas and/or white space; ``#`` starts a comment;
+    with ``header_allowed`` one non-numeric line before the data is skipped.
+    Every row has the first row's column count, every value is finite.
+
+    Raises:
+      ValueError: naming the file and line of the first malformed row.
+    """
     rows: list[list[float]] = []
     first_line = 0  # line number of the first data row, for the column-count message
-    header_allowed = path.suffix.lower() == ".csv"
     for number, line in enumerate(text.splitlines(), start=1):
         line = line.split("#", 1)[0].strip()
         if not line:
             continue
         if _EMPTY_FIELD.search(line):
             raise ValueError(f"{path}:{number}: empty field (a comma with no number before it): {line[:80]!r}")
-        fields = _SEPARATOR.split(line.strip(", \t"))
-        values = _parse_row(fields)
+        values = parse_row(_SEPARATOR.split(line.strip(", \t")))
         if values is None:
             if header_allowed and not rows:
                 header_allowed = False  # only one header line, and only before the data
@@ -70,10 +81,9 @@ def _read_text(path: Path) -> tuple[np.ndarray, np.ndarray | None]:
             raise ValueError(f"{path}:{number}: not a row of numbers: {line[:80]!r}")
         header_allowed = False
         if not rows:
-            if len(values) not in (2, 3):
-                raise ValueError(
-                    f"{path}:{number}: expected 2 columns (x y) or 3 (x y mass), got {len(values)}"
-                )
+            if len(values) not in layouts:
+                expected = " or ".join(f"{k} ({v})" for k, v in layouts.items())
+                raise ValueError(f"{path}:{number}: expected {expected} columns, got {len(values)}")
             first_line = number
         elif len(values) != len(rows[0]):
             raise ValueError(
@@ -84,7 +94,11 @@ def _read_text(path: Path) -> tuple[np.ndarray, np.ndarray | None]:
         rows.append(values)
     if not rows:
         raise ValueError(f"{path}: no points (the file holds no data rows)")
-    data = np.array(rows, dtype=np.float64)
+    return np.array(rows, dtype=np.float64)
+
+
+def _read_text(path: Path) -> tuple[np.ndarray, np.ndarray | None]:
+    data = read_table(path, read_text(path), {2: "x y", 3: "x y mass"}, header_allowed=path.suffix.lower() == ".csv")
     return data[:, :2].copy(), (data[:, 2].copy() if data.shape[1] == 3 else None)
 
 

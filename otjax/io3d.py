@@ -34,7 +34,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from otjax.io import _EMPTY_FIELD, _SEPARATOR, _parse_row
+from otjax.io import parse_row, read_table, read_text
 
 POINT_EXTENSIONS = (".xyz", ".csv", ".txt", ".ply")
 MESH_EXTENSIONS = (".ply", ".obj", ".off")
@@ -86,7 +86,7 @@ def read_points3d(path) -> tuple[np.ndarray, np.ndarray | None]:
             points = _ply_xyz(path, ply)
             mass = _ply_scalar(path, ply["vertex"], "mass") if "mass" in _names(ply["vertex"]) else None
             return points, mass
-        table = _read_table(path, _text(path), header_allowed=ext == ".csv")
+        table = read_table(path, read_text(path), TEXT_LAYOUTS, header_allowed=ext == ".csv")
     except OSError as err:
         raise ValueError(f"cannot read {path}: {err.strerror or err}") from None
     return table[:, :3].copy(), (table[:, -1].copy() if table.shape[1] in (4, 7) else None)
@@ -114,55 +114,15 @@ def read_mesh(path) -> Mesh:
         if ext == ".ply":
             vertices, faces, edges = _ply_mesh(path)
         elif ext == ".obj":
-            vertices, faces, edges = _obj_mesh(path, _text(path))
+            vertices, faces, edges = _obj_mesh(path, read_text(path))
         else:
-            vertices, faces, edges = _off_mesh(path, _text(path))
+            vertices, faces, edges = _off_mesh(path, read_text(path))
     except OSError as err:
         raise ValueError(f"cannot read {path}: {err.strerror or err}") from None
     return _checked_mesh(path, vertices, faces, edges)
 
 
 # ----------------------------------------------------------------- text points
-
-
-def _text(path: Path) -> str:
-    try:
-        return path.read_text(encoding="utf-8-sig")  # a byte order mark is not data
-    except UnicodeDecodeError:
-        raise ValueError(f"{path}: not a UTF-8 text file") from None
-
-
-def _read_table(path: Path, text: str, header_allowed: bool) -> np.ndarray:
-    """The rows of a text point file, ``(n, c)`` with ``c`` a key of :data:`TEXT_LAYOUTS`."""
-    rows: list[list[float]] = []
-    first_line = 0
-    for number, line in enumerate(text.splitlines(), start=1):
-        line = line.split("#", 1)[0].strip()
-        if not line:
-            continue
-        if _EMPTY_FIELD.search(line):
-            raise ValueError(f"{path}:{number}: empty field (a comma with no number before it): {line[:80]!r}")
-        values = _parse_row(_SEPARATOR.split(line.strip(", \t")))
-        if values is None:
-            if header_allowed and not rows:
-                header_allowed = False
-                continue
-            raise ValueError(f"{path}:{number}: not a row of numbers: {line[:80]!r}")
-        header_allowed = False
-        if not rows:
-            if len(values) not in TEXT_LAYOUTS:
-                layouts = ", ".join(f"{k} ({v})" for k, v in TEXT_LAYOUTS.items())
-                raise ValueError(f"{path}:{number}: expected {layouts} columns, got {len(values)}")
-            first_line = number
-        elif len(values) != len(rows[0]):
-            raise ValueError(
-                f"{path}:{number}: expected {len(rows[0])} columns like line {first_line}, got {len(values)}")
-        if not all(np.isfinite(values)):
-            raise ValueError(f"{path}:{number}: NaN or inf value: {line[:80]!r}")
-        rows.append(values)
-    if not rows:
-        raise ValueError(f"{path}: no points (the file holds no data rows)")
-    return np.array(rows, dtype=np.float64)
 
 
 # ------------------------------------------------------------------------ PLY
@@ -280,7 +240,7 @@ def _obj_mesh(path: Path, text: str):
             continue
         key, args = fields[0], fields[1:]
         if key == "v":
-            values = _parse_row(args[:3]) if len(args) >= 3 else None
+            values = parse_row(args[:3]) if len(args) >= 3 else None
             if values is None:
                 raise ValueError(f"{path}:{number}: a vertex needs 3 numbers: {line[:80]!r}")
             vertices.append(values)
@@ -313,7 +273,7 @@ def _off_mesh(path: Path, text: str):
         raise ValueError(f"{path}: OFF file declares {nv} vertices and {nf} faces but has {len(body)} lines after the counts")
     vertices = []
     for number, fields in body[:nv]:
-        values = _parse_row(fields[:3]) if len(fields) >= 3 else None
+        values = parse_row(fields[:3]) if len(fields) >= 3 else None
         if values is None:
             raise ValueError(f"{path}:{number}: a vertex needs 3 numbers: {' '.join(fields)[:80]!r}")
         vertices.append(values)

@@ -51,7 +51,7 @@ def test_csv_header_and_commas(tmp_path):
 
 
 @pytest.mark.parametrize("text, message", [
-    ("1 2\n", "expected 3 .x y z., 4"), ("1 2 3 4 5\n", "got 5"), ("1 2 3\n1 2 3 4\n", ":2: expected 3 columns"),
+    ("1 2\n", "expected 3 .x y z. or 4"), ("1 2 3 4 5\n", "got 5"), ("1 2 3\n1 2 3 4\n", ":2: expected 3 columns"),
     ("1 2 nan\n", "NaN or inf"), ("1 2 x\n", "not a row of numbers"), ("# nothing\n", "no points"),
     ("1,,2,3\n", "empty field"),
 ])
