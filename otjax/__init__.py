@@ -17,17 +17,24 @@ Public API (2D curves):
   specs, packing, the dispatch pipeline.
 - :mod:`otjax.stencil` -- padded stencil batches of the public batched kernel.
 
-Surfaces (3D, Digne et al. 2014), the transport layer so far:
+Surfaces (3D, Digne et al. 2014):
 
+- :mod:`otjax.surfaces` -- the simplicial complex, facet bins, the sparse
+  transport plan, local relaxation, the initial complex, vertex relocation,
+  facet filtering, :class:`~otjax.surfaces.SurfaceResult`, a 3D view, and
+  :func:`~otjax.surfaces.recover_features` (sharp features of a smooth mesh).
 - :mod:`otjax.lp` -- padded batches of local transport LPs, the batched JAX
   solver and the exact HiGHS one, per-member status.
-- :mod:`otjax.surfaces` -- the simplicial complex, facet bins, the sparse
-  transport plan, local relaxation and the initial complex.
+- :mod:`otjax.datasets3d`, :mod:`otjax.metrics3d` -- surfaces with known
+  ground truth (creases, boundaries) and distances to it.
+- :mod:`otjax.io3d` -- 3D point files and triangle meshes (``.ply``,
+  ``.obj``, ``.off``).
 - :func:`enable_compilation_cache` -- keep compiled kernels on disk for
   later processes (the command line does by default).
 """
 
-from otjax import batch, curves, datasets, decimation, lp, metrics, stencil, surfaces
+from otjax import (batch, curves, datasets, datasets3d, decimation, io3d, lp, metrics, metrics3d, stencil,
+                   surfaces)
 from otjax.background import Background, estimate_background
 from otjax.compile_cache import enable_compilation_cache
 from otjax.curves.reconstruct import reconstruct_curve
@@ -40,12 +47,15 @@ __all__ = [
     "batch",
     "curves",
     "datasets",
+    "datasets3d",
     "decimation",
     "enable_compilation_cache",
     "estimate_background",
     "image_to_points",
+    "io3d",
     "lp",
     "metrics",
+    "metrics3d",
     "read_points",
     "reconstruct_curve",
     "stencil",

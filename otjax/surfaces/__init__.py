@@ -20,6 +20,8 @@ simplicial complex, for research code and notebooks.
   density (§4.4).
 - :class:`SurfaceResult` -- a reconstructed surface: arrays, densities,
   ``.save()`` (``.ply``, ``.obj``, ``.off``, ``.json``), ``.plot()``.
+- :func:`recover_features` -- pull a smooth mesh's vertices onto the creases
+  and boundaries of its points and reopen filled holes (§5).
 - :func:`plot_complex` -- a matplotlib 3D view of points, the complex
   coloured by density and the transport plan.
 
@@ -28,6 +30,7 @@ The LP layer itself (padded batches, solvers, statuses) is :mod:`otjax.lp`.
 
 from otjax.surfaces.bins import FacetBins, bin_positions, facet_bins
 from otjax.surfaces.complex import CollapseChange, ComplexArrays, LocalComplex, SimplicialComplex
+from otjax.surfaces.features import FeatureRecovery, PassStats, recover_features
 from otjax.surfaces.filtering import FacetDensity, FilteredComplex, facet_density, filter_facets
 from otjax.surfaces.initial_complex import InitialComplex, initial_complex, initial_settings
 from otjax.surfaces.plan import BinSettings, Stencil, SurfacePlan
@@ -38,9 +41,9 @@ from otjax.surfaces.result import SurfaceResult
 from otjax.surfaces.solvers import LocalSolver, exact_solver
 
 __all__ = [
-    "BinSettings", "CollapseChange", "ComplexArrays", "FacetBins", "FacetDensity", "FilteredComplex",
-    "InitialComplex", "LocalComplex", "LocalSolution", "LocalSolver", "RefineStats", "RelaxationStats",
+    "BinSettings", "CollapseChange", "ComplexArrays", "FacetBins", "FacetDensity", "FeatureRecovery", "FilteredComplex",
+    "InitialComplex", "LocalComplex", "LocalSolution", "LocalSolver", "PassStats", "RefineStats", "RelaxationStats",
     "RelocationStats", "SimplicialComplex", "Stencil", "SurfacePlan", "SurfaceResult", "bin_positions",
     "exact_solver", "facet_bins", "facet_density", "facet_ring", "filter_facets", "initial_complex",
-    "initial_settings", "plan_segments", "plot_complex", "refine", "relax", "relocate", "relocation_targets",
+    "initial_settings", "plan_segments", "plot_complex", "recover_features", "refine", "relax", "relocate", "relocation_targets",
 ]
