@@ -116,9 +116,12 @@ def run(sizes, batches, n_exact: int, options: NewtonOptions, dtypes, budget: fl
     for size in sizes:
         p, k = map(int, size.split("x"))
         rng = np.random.default_rng(p * 7919 + k)
-        stencils = [fan_stencil(rng, p, k) for _ in range(max(batches))]
+        # Only as many stencils as the largest batch that will run: 4096 dense
+        # cost matrices of the largest size would not fit in memory.
+        runnable = [b for b in batches if b == 1 or p * k * b <= max_batch_vars]
+        stencils = [fan_stencil(rng, p, k) for _ in range(max(runnable))]
         started = time.perf_counter()
-        n_ex = min(n_exact, max(batches)) if p * k < 200_000 else 1
+        n_ex = min(n_exact, len(stencils)) if p * k < 200_000 else 1
         highs_s, optimum = bench_highs(stencils[:n_ex])
         rows.append({"points": p, "bins": k, "variables": p * k, "solver": "highs", "batch": 1,
                      "seconds_per_stencil": highs_s, "stencils": n_ex})
@@ -126,7 +129,7 @@ def run(sizes, batches, n_exact: int, options: NewtonOptions, dtypes, budget: fl
         for dtype in dtypes:
             for b in batches:
                 # Large stencils only in small batches: larger ones exceed the time budget.
-                if b > 1 and (p * k * b > max_batch_vars or time.perf_counter() - started > budget):
+                if b not in runnable or (b > 1 and time.perf_counter() - started > budget):
                     continue
                 res = bench_batched(stencils[:b], options, dtype)
                 m = min(b, n_ex)
