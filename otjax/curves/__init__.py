@@ -73,13 +73,12 @@ from otjax.curves.cost import (
     assign_points,
     batched_stencil_cost,
     fixed_assignment_cost,
-    mass_before_rank,
-    mass_before_sort,
     segment_sqdist,
     stencil_cost,
 )
 from otjax.curves.decimate import QUEUES, DecimationStats, decimate, within_tolerance
 from otjax.curves.engine import CurveEngine, Scored
+from otjax.curves.mass_before import mass_before_rank, mass_before_sort
 from otjax.curves.plan import Change, TransportPlan
 from otjax.curves.reconstruct import default_initial_vertices, reconstruct_curve
 from otjax.curves.refinement import minimize_lbfgs, refine

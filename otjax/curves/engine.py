@@ -3,9 +3,10 @@
 :class:`CurveEngine` owns the pieces of a 2D decimation and calls them one
 way: the loop (:mod:`otjax.decimation.loop`) asks it to score half-edges,
 take scored ones, apply them and relocate vertices; the engine calls the
-stencil cache and :mod:`~otjax.curves.export` (jobs -> flat batches), the
-:class:`~otjax.curves.scorer.Scorer` (kernel), reads the results, and
-applies changes to the :class:`~otjax.curves.plan.TransportPlan`, whose
+stencil cache, :mod:`~otjax.curves.export` and :mod:`~otjax.curves.batches`
+(jobs -> flat batches), the :class:`~otjax.curves.scorer.Scorer` (kernel),
+reads the results, and applies changes to the
+:class:`~otjax.curves.plan.TransportPlan`, whose
 :class:`~otjax.curves.plan.Change` it hands to the
 :class:`~otjax.curves.rescoring.ChangeLog` and returns. Nothing below it
 calls back up.
@@ -18,17 +19,20 @@ from __future__ import annotations
 
 import itertools
 import time
-from collections import OrderedDict
 from typing import NamedTuple
 
 import numpy as np
 
 from otjax.batch.pipeline import pipelined
 from otjax.curves import scoring
-from otjax.curves.export import HostBatch, Stencils, export_jobs, held_bytes, located_batches, packed_batches
+from otjax.curves.batches import located_batches, packed_batches
+from otjax.curves.export import Stencils, export_jobs
+from otjax.curves.host_batch import HostBatch
+from otjax.curves.hot_stencils import HotEntry, HotStencils
+from otjax.curves.kernel_outputs import held_bytes
 from otjax.curves.plan import Change, TransportPlan
 from otjax.curves.relocation import optimal_position
-from otjax.curves.rescoring import ChangeLog, LinkUpdates
+from otjax.curves.rescoring import ChangeLog, LinkRecords, LinkUpdates
 from otjax.curves.scorer import Scorer
 from otjax.curves.stencils import CandidateCost, CandidateStencil, StencilCache
 from otjax.curves.triangulation import Triangulation
@@ -36,11 +40,6 @@ from otjax.curves.triangulation import Triangulation
 # Collapses whose stencil has fewer rows are scored again in full rather than
 # updated on their link (docs/decisions.md#update_min_rows).
 UPDATE_MIN_ROWS = 512
-# Bytes of the scoring calls whose stencils stay at hand for take (the
-# latest calls': their host batches and kernel outputs). The winner of a
-# step was usually scored a few dozen calls before; one not at hand is
-# exported and scored again (docs/decisions.md#hot_bytes).
-HOT_BYTES = 64 << 20
 
 
 class Scored(NamedTuple):
@@ -85,17 +84,12 @@ class CurveEngine:
         self.stencils = StencilCache(self.plan, self.log, max_source_degree)
         self.scorer = Scorer(self.plan.points, self.plan.mass, dtype)
         self.links = LinkUpdates(self.plan, self.log, self.stencils)
+        self.records = LinkRecords(self.links)
+        self.hot = HotStencils()
         self.incremental = incremental
         self.update_min_rows = update_min_rows
         self.counts = {"scored": 0, "updated": 0, "partial": 0}
         self.seconds = {"export": 0.0, "score": 0.0}
-        # {source: {target: (stencils, costs, index, plan, version, call)}}: the stencils of the latest
-        # scoring calls, by call in _hot_calls ({call: (rows, keys)}, oldest first).
-        self._hot: dict[int, dict] = {}
-        self._hot_calls: OrderedDict = OrderedDict()
-        self._hot_bytes = 0
-        self._calls = 0
-        self._records: dict[int, dict] = {}  # {source: {target: LinkRecord}}
         self._partial: dict = {}  # key -> Partial, within one score call
         keys, parts = self.plan.points_by_edge()
         self.plan.set_edge_costs(keys, self.scorer.edge_costs(parts, tri.xy[keys]))
@@ -156,7 +150,7 @@ class CurveEngine:
         tracking = self.incremental and veto is None and targets is None
         if tracking:
             t0 = time.perf_counter()
-            targets, updates, partial = self._split(sources)
+            targets, updates, partial = self.records.split(sources)
             self.seconds["export"] += time.perf_counter() - t0
             full = sorted(targets)
         self._partial = {(job.plan.source, job.plan.target): pending for job, pending in partial}
@@ -174,7 +168,7 @@ class CurveEngine:
             costs = self.scorer.edge_costs([p.points for p in parts], self.plan.tri.xy[keys])[:, 0]
             for rec, delta in self.links.finish_links(updates, parts, costs):
                 key = (rec.plan.source, rec.plan.target)
-                self._records.setdefault(key[0], {})[key[1]] = rec
+                self.records.put(key, rec)
                 entered.append((key, delta))
             self.seconds["score"] += time.perf_counter() - t0
             self.counts["updated"] += len(updates)
@@ -207,7 +201,7 @@ class CurveEngine:
     def _settle(self, batch, handle, entered: list, veto, keep: bool, tracking: bool) -> None:
         """Reads a dispatched batch into ``entered`` (and records, hot stencils)."""
         kept: list = []
-        call = self._calls = self._calls + 1
+        call = self.hot.new_call()
         deltas, costs = self._collect(batch, handle)
         cands, version = batch.cands, self.log.version
         rows = np.diff(batch.row_start).tolist()
@@ -219,7 +213,7 @@ class CurveEngine:
             part = self._partial.pop(key, None)
             if part is not None:  # scored in part: not a whole stencil, never kept
                 rec, delta = self.links.finish_partial(part, cands[j], costs[j])
-                self._records.setdefault(key[0], {})[key[1]] = rec
+                self.records.put(key, rec)
                 entered.append((key, delta))
                 self.counts["partial"] += 1
                 continue
@@ -228,52 +222,13 @@ class CurveEngine:
             delta = d
             if tracking and n >= self.update_min_rows:
                 rec = self.links.record(cands[j], costs[j])
-                self._records.setdefault(key[0], {})[key[1]] = rec
+                self.records.put(key, rec)
                 delta = rec.delta(float(batch.before[j]))
             entered.append((key, delta))
             if keep:
-                self._hot.setdefault(key[0], {})[key[1]] = (cands, costs, j, plan, version[key[0]], call)
-                kept.append(key)
+                kept.append((key, HotEntry(cands, costs, j, plan, version[key[0]], call)))
         if kept:
-            self._keep_hot(call, held_bytes(batch, costs), kept)
-
-    def _keep_hot(self, call: int, size: int, keys: list) -> None:
-        """Registers the hot stencils of one call (``size`` bytes held),
-        dropping the oldest calls' beyond :data:`HOT_BYTES`."""
-        self._hot_calls[call] = (size, keys)
-        self._hot_bytes += size
-        while self._hot_bytes > HOT_BYTES and len(self._hot_calls) > 1:
-            old, (n, old_keys) = self._hot_calls.popitem(last=False)
-            self._hot_bytes -= n
-            for s, t in old_keys:
-                targets = self._hot.get(s)
-                if targets is not None and t in targets and targets[t][5] == old:
-                    del targets[t]
-
-    def _split(self, sources):
-        """Sources' half-edges to score in full (``{source: targets}``),
-        ``(record, changed links)`` of those only their link changed, and
-        ``(job, pending)`` of those a ring move changed in part."""
-        tri = self.plan.tri
-        full: dict[int, list[int]] = {}
-        updates, partial = [], []
-        for v in sources:
-            recs = self._records.pop(v, {})
-            if not tri.alive[v] or tri.pinned[v]:
-                continue
-            for w in tri.star(v)[0]:
-                rec = recs.get(w)
-                changes = None if rec is None else self.links.record_changes(rec)
-                if changes is not None and changes[1]:
-                    part = self.links.partial_job(rec, *changes)
-                    if part is not None:
-                        partial.append(part)
-                        continue
-                elif changes is not None:
-                    updates.append((rec, changes[0]))
-                    continue
-                full.setdefault(v, []).append(w)
-        return full, updates, partial
+            self.hot.keep(call, held_bytes(batch, costs), kept)
 
     def take(self, keys) -> list[Scored]:
         """The scored candidates of fresh half-edges ``keys``, exporting again
@@ -282,14 +237,13 @@ class CurveEngine:
         again: dict[int, list[int]] = {}
         version = self.log.version
         for key in keys:
-            h = self._hot.get(key[0], {}).pop(key[1], None)
+            h = self.hot.pop(key)
             # The plan too: a change of the target's star alone can change it.
-            if h is not None and h[4] == version[key[0]] and self.stencils.collapse_plan(*key) == h[3]:
-                cands, costs, j = h[:3]
-                out[key] = Scored(cands[j], costs[j])
+            if h is not None and h.version == version[key[0]] and self.stencils.collapse_plan(*key) == h.plan:
+                out[key] = Scored(h.stencils[h.index], h.costs[h.index])
             else:
                 again.setdefault(key[0], []).append(key[1])
-            self._records.pop(key[0], None)
+            self.records.drop(key[0])
         if again:
             t0 = time.perf_counter()
             batch = self.export(sorted(again), again)
@@ -305,7 +259,7 @@ class CurveEngine:
         self.log.record(change)
         self.stencils.forget(change.source)
         for v in change.touched | {change.source}:  # their stencils are stale now
-            self._hot.pop(v, None)
+            self.hot.forget(v)
         return change
 
     def movable(self, v: int) -> bool:
@@ -334,7 +288,7 @@ class CurveEngine:
         return self.scorer.compiled_shapes
 
     def exports(self, sources, targets: dict | None = None, budget: int = scoring.ROW_BUDGET, extra=()):
-        """:func:`~otjax.curves.export.packed_batches` of the half-edges
+        """:func:`~otjax.curves.batches.packed_batches` of the half-edges
         leaving ``sources`` (then the jobs ``extra``)."""
         jobs = itertools.chain((job for v in sources for job in self.stencils.collapse_jobs([v], targets)), extra)
         return packed_batches(jobs, self.plan, budget)

@@ -16,10 +16,10 @@ import jax
 import numpy as np
 
 from otjax.background import Background, estimate_background
-from otjax.curves import filtering
 from otjax.curves.decimate import QUEUES, DecimationStats, decimate, within_tolerance
 from otjax.curves.engine import CurveEngine
 from otjax.curves.plan import TransportPlan
+from otjax.curves.plan_result import result_from_plan
 from otjax.curves.refinement import refine as refine_positions
 from otjax.curves.result import CurveResult
 from otjax.curves.triangulation import Triangulation
@@ -48,68 +48,52 @@ def reconstruct_curve(points, masses=None, n_vertices: int | None = None, *, tol
       points: ``(n, 2)`` input points.
       masses: ``(n,)`` non-negative masses (default: all ones).
       n_vertices: target vertex count of the simplification (``>= 1``).
-      tolerance: tolerance mode (paper §3.5): discard every collapse that
-        would make some edge's RMS normal or tangential transport distance
-        exceed this (input units); stops when no collapse is left. May be
-        combined with ``n_vertices`` (whichever stops first). It bounds the
-        root mean square over each edge's points, not the maximum the paper
-        speaks of: single points can end up farther than the tolerance.
-      relevance: keep only solid edges whose relevance
-        ``M_e |e|^2 / (N_e + T_e)`` (paper §3.4) is at least this; ``0``
-        keeps every solid edge.
-      density: keep only solid edges whose mass per unit length ``M_e/|e|``
-        is at least this fraction (in ``[0, 1]``) of the largest one. Not in
-        the paper: its relevance does not depend on density at all (``M_e``
-        cancels against ``N_e + T_e``), so it cannot tell a sparse outlier
-        edge from a dense one on the shape (docs/benchmarks.md#outliers-relevance-against-density).
-      background: ``"auto"``: estimate uniform background noise from the
-        points (:func:`otjax.background.estimate_background`); where there
-        is some, each point's mass is scaled by its probability of being
-        shape before the reconstruction, and edges and isolated vertices
-        that do not stand out of the background are dropped at the end
-        (:func:`otjax.curves.filtering.above_background`). Without
-        background (clean or merely noisy input) nothing changes.
-        ``"none"``: no estimate.
-      chords: drop the redundant chords of 3-cycles of solid edges that
-        noise leaves (:func:`otjax.curves.filtering.redundant_chords`).
-      relocation: relocate the vertices of the modified one-ring after each
-        of the last ``relocation`` collapses (paper and default: 100);
-        ``None``: after every collapse (as the C++ reference does); ``0``
-        disables. Ignored in pure tolerance mode, where the end is not
-        known ahead.
-      final_relocations: relocation passes over every vertex at the end
-        (fewer if a pass moves none).
-      refine: after the closed form, refine all vertex positions by L-BFGS
-        on the fixed-assignment cost (kept only if the cost does not rise).
-      queue: ``None``: :func:`default_queue`; ``"exhaustive"`` (every
-        half-edge scored, the paper's default),
-        ``"multiple-choice"`` (paper §3.5: the best of ``choices`` random
-        half-edges per step, exhaustive below 5x the target) or
-        ``"parallel"`` (independent sets of cheap collapses per round; not
-        in the paper). See :func:`otjax.curves.decimate.decimate`.
-      choices: half-edges drawn per multiple-choice step (paper: typically 10;
-        docs/decisions.md#choices).
-      round_fraction: parallel queue: a round collapses at most this
-        fraction of the collapses still to do (docs/decisions.md#round_fraction).
-      initial_vertices: size of the random subset of the points that
-        becomes the initial triangulation (paper §3.5); every point still
-        carries its mass. ``None``: :func:`default_initial_vertices`.
-      seed: seed of the random subset and of the multiple-choice draws;
-        same seed, same result.
-      merge_duplicates: merge repeated points by summing their masses
-        instead of rejecting them.
+      tolerance: tolerance mode (paper §3.5): discard every collapse that would make some edge's RMS normal
+        or tangential transport distance exceed this (input units); stops when no collapse is left. May be
+        combined with ``n_vertices`` (whichever stops first). It bounds the root mean square over each
+        edge's points, not the maximum the paper speaks of: single points can end up farther than the
+        tolerance.
+      relevance: keep only solid edges whose relevance ``M_e |e|^2 / (N_e + T_e)`` (paper §3.4) is at least
+        this; ``0`` keeps every solid edge.
+      density: keep only solid edges whose mass per unit length ``M_e/|e|`` is at least this fraction (in
+        ``[0, 1]``) of the largest one. Not in the paper: its relevance does not depend on density at all
+        (``M_e`` cancels against ``N_e + T_e``), so it cannot tell a sparse outlier edge from a dense one on
+        the shape (docs/benchmarks.md#outliers-relevance-against-density).
+      background: ``"auto"``: estimate uniform background noise from the points
+        (:func:`otjax.background.estimate_background`); where there is some, each point's mass is scaled by
+        its probability of being shape before the reconstruction, and edges and isolated vertices that do
+        not stand out of the background are dropped at the end
+        (:func:`otjax.curves.filtering.above_background`). Without background (clean or merely noisy input)
+        nothing changes. ``"none"``: no estimate.
+      chords: drop the redundant chords of 3-cycles of solid edges that noise leaves
+        (:func:`otjax.curves.filtering.redundant_chords`).
+      relocation: relocate the vertices of the modified one-ring after each of the last ``relocation``
+        collapses (paper and default: 100); ``None``: after every collapse (as the C++ reference does);
+        ``0`` disables. Ignored in pure tolerance mode, where the end is not known ahead.
+      final_relocations: relocation passes over every vertex at the end (fewer if a pass moves none).
+      refine: after the closed form, refine all vertex positions by L-BFGS on the fixed-assignment cost
+        (kept only if the cost does not rise).
+      queue: ``None``: :func:`default_queue`; ``"exhaustive"`` (every half-edge scored, the paper's
+        default), ``"multiple-choice"`` (paper §3.5: the best of ``choices`` random half-edges per step,
+        exhaustive below 5x the target) or ``"parallel"`` (independent sets of cheap collapses per round;
+        not in the paper). See :func:`otjax.curves.decimate.decimate`.
+      choices: half-edges drawn per multiple-choice step (paper: typically 10; docs/decisions.md#choices).
+      round_fraction: parallel queue: a round collapses at most this fraction of the collapses still to do
+        (docs/decisions.md#round_fraction).
+      initial_vertices: size of the random subset of the points that becomes the initial triangulation
+        (paper §3.5); every point still carries its mass. ``None``: :func:`default_initial_vertices`.
+      seed: seed of the random subset and of the multiple-choice draws; same seed, same result.
+      merge_duplicates: merge repeated points by summing their masses instead of rejecting them.
       progress: show a progress bar.
 
     Returns:
-      A :class:`CurveResult` in the input's units. The run computes in a
-      canonical frame (:mod:`otjax.frame`), so an input scaled by a power of
-      two gives the scaled result bitwise. Where the total cost does not fit
-      float64's normal range in input units (coordinates near ``1e160``,
-      tiny masses), ``total_cost * 2**params["cost_exponent"]`` is the cost.
+      A :class:`CurveResult` in the input's units. The run computes in a canonical frame
+      (:mod:`otjax.frame`), so an input scaled by a power of two gives the scaled result bitwise. Where the
+      total cost does not fit float64's normal range in input units (coordinates near ``1e160``, tiny
+      masses), ``total_cost * 2**params["cost_exponent"]`` is the cost.
 
     Raises:
-      ValueError: invalid points, masses or parameters (the message says
-        which and why).
+      ValueError: invalid points, masses or parameters (the message says which and why).
 
     Example:
       >>> from otjax.datasets import star
@@ -121,28 +105,42 @@ def reconstruct_curve(points, masses=None, n_vertices: int | None = None, *, tol
     t_start = time.perf_counter()
     points, masses = check_points(points, masses, dim=2, merge_duplicates=merge_duplicates)
     params = _check_params(len(points), n_vertices=n_vertices, tolerance=tolerance, relevance=relevance,
-                           density=density, background=background, chords=chords, relocation=relocation, final_relocations=final_relocations,
-                           refine=refine, queue=queue, choices=choices, round_fraction=round_fraction,
-                           initial_vertices=initial_vertices, seed=seed, merge_duplicates=merge_duplicates)
-    # Everything below runs in the canonical frame (otjax.frame), so nothing depends on the input's units.
-    user_points = points
-    frame, points, masses = to_canonical(points, masses)
-    noise, transported = _discount_background(points, masses, params["background"])
-    # Point location is exact float64 arithmetic: the whole run is in JAX's
-    # x64 mode, entered here, at the boundary, for its duration only.
+                           density=density, background=background, chords=chords, relocation=relocation,
+                           final_relocations=final_relocations, refine=refine, queue=queue, choices=choices,
+                           round_fraction=round_fraction, initial_vertices=initial_vertices, seed=seed,
+                           merge_duplicates=merge_duplicates)
+    given = _in_frame(points, masses, params["background"])
+    # Point location is exact float64 arithmetic: the whole run is in JAX's x64 mode, for its duration only.
     with jax.enable_x64(True):
-        run = _run(points, transported, _params_in_frame(params, frame), progress)
-    stats = run.stats
-    result = result_from_plan(run.engine.plan, params["relevance"], params, time.perf_counter() - t_start,
-                              params["density"], background=noise, input_mass=masses, chords=params["chords"])
-    result = _in_input_units(result, frame, user_points)
-    result.history = {"collapses": stats.collapses, "relocations": run.relocations, "scored": stats.scored,
-                      "updated": stats.updated, "kernel_calls": stats.kernel_calls, "seconds": run.seconds,
-                      "rounds": stats.rounds, "switched_at": stats.switched_at,
-                      "compiled_shapes": run.engine.compiled_shapes,
-                      "refine": run.refined,
-                      "background_fraction": noise.fraction if noise is not None else 0.0}
-    return result
+        run = _run(given.points, given.transported, _params_in_frame(params, given.frame), progress)
+    result = _filtered(run.engine.plan, params, given, time.perf_counter() - t_start)
+    return _in_input_units(result, given.frame, points, _history(run, given.noise))
+
+
+class _InFrame(NamedTuple):
+    """The validated input in the canonical frame (:mod:`otjax.frame`).
+
+    Attributes:
+      frame: the frame.
+      points: ``(n, 2)`` the points in it.
+      masses: ``(n,)`` their masses in it.
+      noise: the estimated background, or ``None``.
+      transported: ``masses`` scaled by each point's probability of being shape.
+    """
+
+    frame: Frame
+    points: np.ndarray
+    masses: np.ndarray
+    noise: Background | None
+    transported: np.ndarray
+
+
+def _in_frame(points: np.ndarray, masses: np.ndarray, background: str) -> _InFrame:
+    """Validated input moved to the canonical frame, so that nothing below
+    depends on the input's units, and its background discounted."""
+    frame, points, masses = to_canonical(points, masses)
+    noise, transported = _discount_background(points, masses, background)
+    return _InFrame(frame, points, masses, noise, transported)
 
 
 def _discount_background(points, masses, mode: str):
@@ -209,32 +207,19 @@ class _Outcome(NamedTuple):
 def _run(points, masses, params: dict, progress: bool) -> _Outcome:
     """The pipeline's steps on validated input (``params``): initial
     triangulation, decimation, final relocation passes, refinement."""
-    n_vertices, tolerance, seed = params["n_vertices"], params["tolerance"], params["seed"]
-    initial_vertices = params["initial_vertices"]
     timings = {}
     t0 = time.perf_counter()
-    rng = np.random.default_rng(seed)
-    if initial_vertices < len(points):
-        subset = np.sort(rng.choice(len(points), initial_vertices, replace=False))
-        vertices = points[subset]
-    else:
-        vertices = points
-    engine = CurveEngine(Triangulation(vertices), points, masses)
+    rng = np.random.default_rng(params["seed"])
+    engine = _triangulate(points, masses, params["initial_vertices"], rng)
     timings["init"] = time.perf_counter() - t0
     relocation = params["relocation"]
-    stats = decimate(engine, n_vertices, tolerance=tolerance,
+    stats = decimate(engine, params["n_vertices"], tolerance=params["tolerance"],
                      relocation=len(points) if relocation is None else relocation,
                      queue=params["queue"], choices=params["choices"], round_fraction=params["round_fraction"],
                      seed=int(rng.integers(2**63)), progress=progress)
     timings.update(stats.seconds)
     t0 = time.perf_counter()
-    veto = within_tolerance(tolerance) if tolerance is not None else None
-    moved = stats.relocations
-    for _ in range(params["final_relocations"]):
-        _, m = relocate(engine, engine.live_sources(), veto)
-        moved += m
-        if m == 0:
-            break
+    moved = stats.relocations + _final_relocations(engine, params["tolerance"], params["final_relocations"])
     timings["final_relocation"] = time.perf_counter() - t0
     stats.kernel_calls = engine.scorer.calls
     refined = None
@@ -246,6 +231,49 @@ def _run(points, masses, params: dict, progress: bool) -> _Outcome:
             stats.kernel_calls += engine.scorer.calls
         timings["refine"] = time.perf_counter() - t0
     return _Outcome(engine, stats, timings, moved, refined)
+
+
+def _triangulate(points: np.ndarray, masses: np.ndarray, initial_vertices: int,
+                 rng: np.random.Generator) -> CurveEngine:
+    """The engine over the initial triangulation: a random subset of
+    ``initial_vertices`` of the points (all of them if that is all)."""
+    if initial_vertices < len(points):
+        subset = np.sort(rng.choice(len(points), initial_vertices, replace=False))
+        vertices = points[subset]
+    else:
+        vertices = points
+    return CurveEngine(Triangulation(vertices), points, masses)
+
+
+def _final_relocations(engine: CurveEngine, tolerance: float | None, passes: int) -> int:
+    """Relocation passes over every live vertex, until one moves none; the
+    vertices moved."""
+    veto = within_tolerance(tolerance) if tolerance is not None else None
+    moved = 0
+    for _ in range(passes):
+        _, m = relocate(engine, engine.live_sources(), veto)
+        moved += m
+        if m == 0:
+            break
+    return moved
+
+
+def _filtered(plan: TransportPlan, params: dict, given: _InFrame, seconds: float) -> CurveResult:
+    """The result of the finished ``plan``: its edges filtered as ``params`` say
+    (:func:`~otjax.curves.plan_result.result_from_plan`), in the canonical frame."""
+    return result_from_plan(plan, params["relevance"], params, seconds, params["density"],
+                            background=given.noise, input_mass=given.masses, chords=params["chords"])
+
+
+def _history(run: _Outcome, noise: Background | None) -> dict:
+    """The result's ``history``: what the run did."""
+    stats = run.stats
+    return {"collapses": stats.collapses, "relocations": run.relocations, "scored": stats.scored,
+            "updated": stats.updated, "kernel_calls": stats.kernel_calls, "seconds": run.seconds,
+            "rounds": stats.rounds, "switched_at": stats.switched_at,
+            "compiled_shapes": run.engine.compiled_shapes,
+            "refine": run.refined,
+            "background_fraction": noise.fraction if noise is not None else 0.0}
 
 
 def default_initial_vertices(n_points: int, n_vertices: int | None) -> int:
@@ -272,107 +300,6 @@ def default_queue(initial_vertices: int, n_vertices: int | None) -> str:
     return "exhaustive" if collapses <= EXHAUSTIVE_COLLAPSES else "multiple-choice"
 
 
-def vertex_and_edge_masses(plan: TransportPlan) -> tuple[dict, dict]:
-    """Mass transported to each solid edge and to each vertex.
-
-    Points of a solid edge stay on it; points of a ghost edge go to its
-    nearer endpoint (ties to the lower id, as ``min`` in the kernel gives the
-    same cost either way).
-
-    Returns:
-      ``(edge_mass, vertex_mass)`` dicts keyed by edge key / vertex id.
-    """
-    xy = plan.tri.xy
-    keys = plan.pt_edge
-    solid = plan.solid_of(keys)
-    edge_mass: dict = {}
-    vertex_mass: dict = {}
-    if solid.any():
-        code, inv = np.unique(keys[solid], axis=0, return_inverse=True)
-        sums = np.bincount(inv.ravel(), plan.mass[solid])
-        edge_mass = {(int(a), int(b)): float(s) for (a, b), s in zip(code, sums)}
-    ghost = ~solid
-    if ghost.any():
-        p, k = plan.points[ghost], keys[ghost]
-        da = ((p - xy[k[:, 0]]) ** 2).sum(1)
-        db = ((p - xy[k[:, 1]]) ** 2).sum(1)
-        end = np.where(da <= db, k[:, 0], k[:, 1])
-        sums = np.bincount(end, plan.mass[ghost], minlength=len(xy))
-        vertex_mass = {int(v): float(sums[v]) for v in np.unique(end)}
-    return edge_mass, vertex_mass
-
-
-def _points_of(plan: TransportPlan, keys: list) -> list[np.ndarray]:
-    """Per edge key of ``keys``, the ids of the points assigned to it."""
-    held, parts = plan.points_by_edge()
-    by_key = {(int(u), int(v)): p[0] for (u, v), p in zip(held, parts)}
-    return [by_key.get(k, np.zeros(0, np.int64)) for k in keys]
-
-
-def result_from_plan(plan: TransportPlan, relevance: float, params: dict, seconds: float,
-                     density: float = 0.0, background: Background | None = None,
-                     input_mass: np.ndarray | None = None, chords: bool = False) -> CurveResult:
-    """Filters the solid edges of a plan; packs a result.
-
-    Kept: solid edges with relevance ``M_e |e|^2 / (N_e + T_e) >= relevance``
-    and ``M_e / |e| >= density * max`` (max over the solid edges); with
-    ``chords``, minus the redundant chords of 3-cycles
-    (:func:`~otjax.curves.filtering.redundant_chords`); with a ``background``
-    that was found, minus the edges (and isolated vertices) whose band of
-    the input (``input_mass``, default the plan's masses) does not stand out
-    of it (:func:`~otjax.curves.filtering.above_background`). Then their
-    endpoints, and isolated vertices (vertices that receive mass but lie on
-    no kept edge). Vertices are numbered in increasing internal id. The
-    pinned box corners and every edge touching them are scaffolding and
-    never appear.
-    """
-    tri = plan.tri
-    edge_mass, vertex_mass = vertex_and_edge_masses(plan)
-    kept, masses, rel = [], [], []
-    # Edges touching the box corners are scaffolding, not shape.
-    shape_edges = [k for k in sorted(edge_mass) if not (tri.pinned[k[0]] or tri.pinned[k[1]])]
-    length = {k: float(np.linalg.norm(tri.xy[k[0]] - tri.xy[k[1]])) for k in shape_edges}
-    floor = density * max((edge_mass[k] / length[k] for k in shape_edges), default=0.0)
-    for key in shape_edges:
-        if edge_mass[key] / length[key] < floor:
-            continue
-        cost = plan.edge_cost[key]
-        r = edge_mass[key] * length[key] ** 2 / cost if cost > 0 else float(np.finfo(np.float64).max)
-        if r >= relevance:
-            kept.append(key)
-            masses.append(edge_mass[key])
-            rel.append(r)
-    if chords and kept:
-        keep = filtering.redundant_chords(kept, tri.xy, _points_of(plan, kept), plan.points, plan.mass)
-        kept, masses, rel = ([x for x, k in zip(seq, keep) if k] for seq in (kept, masses, rel))
-    on_edges = {v for e in kept for v in e}
-    isolated = sorted(v for v, m in vertex_mass.items() if m > 0 and v not in on_edges and not tri.pinned[v])
-    if background is not None and background.found and (kept or isolated):
-        normal = np.array([plan.edge_normal.get(k, 0.0) for k in kept])
-        width = filtering.BAND_WIDTHS * filtering.noise_width(normal, np.array(masses))
-        seg = np.array([[tri.xy[a], tri.xy[b]] for a, b in kept]).reshape(-1, 2, 2)
-        mass = plan.mass if input_mass is None else input_mass
-        keep, keep_v = filtering.above_background(seg, tri.xy[isolated].reshape(-1, 2), plan.points, mass,
-                                                  background, width)
-        kept, masses, rel = ([x for x, k in zip(seq, keep) if k] for seq in (kept, masses, rel))
-        on_edges = {v for e in kept for v in e}
-        isolated = [v for v, k in zip(isolated, keep_v) if k and v not in on_edges]
-    ids = sorted(on_edges | set(isolated))
-    index = {v: i for i, v in enumerate(ids)}
-    return CurveResult(
-        vertices=tri.xy[ids].reshape(-1, 2).copy(),
-        edges=np.array([[index[a], index[b]] for a, b in kept], np.int64).reshape(-1, 2),
-        isolated=np.array([index[v] for v in isolated], np.int64),
-        edge_mass=np.array(masses, np.float64),
-        edge_relevance=np.array(rel, np.float64),
-        total_cost=plan.total_cost(),
-        params=dict(params),
-        seconds=float(seconds),
-        points=plan.points,
-        masses=plan.mass,
-    )
-
-
 # Canonical distances are below the pinned box's diagonal (< 4): any larger tolerance vetoes
 # nothing, and capping it keeps its square finite.
 _TOLERANCE_CAP = 2.0**32
@@ -385,11 +312,12 @@ def _params_in_frame(params: dict, frame: Frame) -> dict:
     return {**params, "tolerance": min(frame.length_in(params["tolerance"]), _TOLERANCE_CAP)}
 
 
-def _in_input_units(result: CurveResult, frame: Frame, points: np.ndarray) -> CurveResult:
-    """``result`` (computed in ``frame``) with vertices, masses and cost in the input's units."""
+def _in_input_units(result: CurveResult, frame: Frame, points: np.ndarray, history: dict) -> CurveResult:
+    """``result`` (computed in ``frame``) with vertices, masses and cost in
+    the input's units, and ``history``."""
     cost, exponent = frame.cost_out(result.total_cost)
     params = result.params if exponent == 0 else {**result.params, "cost_exponent": exponent}
     return CurveResult(vertices=frame.points_out(result.vertices), edges=result.edges, isolated=result.isolated,
                        edge_mass=frame.masses_out(result.edge_mass), edge_relevance=result.edge_relevance,
                        total_cost=cost, params=params, seconds=result.seconds, points=points,
-                       masses=frame.masses_out(result.masses))
+                       masses=frame.masses_out(result.masses), history=history)

@@ -329,3 +329,59 @@ class LinkUpdates:
             rec = rec._replace(version=self.log.version[v], edge_cost=cost)
             out.append((rec, rec.delta(self.stencils.region(v).before)))
         return out
+
+
+class Split(NamedTuple):
+    """The half-edges of some sources, by how they are brought up to date
+    (see :meth:`LinkRecords.split`)."""
+
+    full: dict
+    updates: list
+    partial: list
+
+
+class LinkRecords:
+    """The :class:`LinkRecord` of each collapse scored in full or updated,
+    by source then target, and what each needs now.
+
+    Args:
+      links: the :class:`LinkUpdates` that reads what changed.
+    """
+
+    def __init__(self, links: LinkUpdates):
+        self.links = links
+        self._by_source: dict[int, dict[int, LinkRecord]] = {}
+
+    def put(self, key: tuple[int, int], rec: LinkRecord) -> None:
+        """Records half-edge ``key``'s scoring (replacing an older one)."""
+        self._by_source.setdefault(key[0], {})[key[1]] = rec
+
+    def drop(self, source: int) -> None:
+        """Forgets the records of the half-edges leaving ``source``."""
+        self._by_source.pop(source, None)
+
+    def split(self, sources) -> Split:
+        """The half-edges leaving ``sources``: to score in full (``full``,
+        ``{source: targets}``), ``(record, changed links)`` of those only
+        their link changed (``updates``), and ``(job, pending)`` of those a
+        ring move changed in part (``partial``). Their records are dropped."""
+        tri = self.links.plan.tri
+        full: dict[int, list[int]] = {}
+        updates, partial = [], []
+        for v in sources:
+            recs = self._by_source.pop(v, {})
+            if not tri.alive[v] or tri.pinned[v]:
+                continue
+            for w in tri.star(v)[0]:
+                rec = recs.get(w)
+                changes = None if rec is None else self.links.record_changes(rec)
+                if changes is not None and changes[1]:
+                    part = self.links.partial_job(rec, *changes)
+                    if part is not None:
+                        partial.append(part)
+                        continue
+                elif changes is not None:
+                    updates.append((rec, changes[0]))
+                    continue
+                full.setdefault(v, []).append(w)
+        return Split(full, updates, partial)

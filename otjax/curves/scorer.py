@@ -3,7 +3,7 @@
 The :class:`Scorer` owns the :class:`~otjax.batch.pipeline.KernelPipeline`
 of :func:`otjax.curves.scoring.score_packed` and the points it gathers rows
 from. It neither builds batches (:mod:`otjax.curves.export` does) nor keeps
-results: it turns a :class:`~otjax.curves.export.HostBatch` into candidate
+results: it turns a :class:`~otjax.curves.host_batch.HostBatch` into candidate
 costs, locating on the host the rows the kernel's filter was unsure of.
 """
 
@@ -13,7 +13,10 @@ import numpy as np
 
 from otjax.batch.pipeline import Handle, KernelPipeline, pipelined
 from otjax.curves import scoring
-from otjax.curves.export import HostBatch, cut_outputs, keep_located, locate_on_host, located_jobs, read_costs
+from otjax.curves.batches import located_jobs
+from otjax.curves.host_batch import HostBatch
+from otjax.curves.host_location import keep_located, locate_on_host
+from otjax.curves.kernel_outputs import cut_outputs, read_costs
 from otjax.curves.stencils import CandidateCost
 
 

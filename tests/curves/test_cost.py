@@ -15,7 +15,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.spatial import Delaunay
 
-from otjax.curves import cost
+from otjax.curves import cost, mass_before
 from otjax.stencil import Buckets, EdgeStencil, pack_edge_stencils
 from tests.oracles import oracle_edge_cost, oracle_segment_sqdist, oracle_stencil_cost
 
@@ -255,9 +255,9 @@ def test_segment_sqdist_interior():
 @functools.partial(jax.jit, compiler_options=FAST_COMPILE)
 def _mass_before_both(edge, t, m):
     return {
-        "rank": cost.mass_before_rank(edge, t, m),
-        "sort": cost.mass_before_sort(edge, t, m, num_bins=4),
-        "order": cost.sort_order(edge, t, 4),
+        "rank": mass_before.mass_before_rank(edge, t, m),
+        "sort": mass_before.mass_before_sort(edge, t, m, num_bins=4),
+        "order": mass_before.sort_order(edge, t, 4),
     }
 
 
@@ -396,5 +396,5 @@ def test_sort_order_equals_lexsort_with_near_ties(data):
     t = base + np.where(rng.random(n) < 0.5, 0.0, np.spacing(base) * rng.integers(-3, 4, n))
     t[rng.random(n) < 0.1] = -0.0
     with jax.enable_x64(True):
-        got = np.asarray(jax.jit(cost.sort_order, static_argnums=2)(edge, t, 8))
+        got = np.asarray(jax.jit(mass_before.sort_order, static_argnums=2)(edge, t, 8))
     np.testing.assert_array_equal(got, np.lexsort((np.arange(n), np.where(t == 0, 0.0, t), edge)))

@@ -11,7 +11,7 @@ from scipy import stats
 import otjax
 from otjax.curves.decimate import decimate
 from otjax.curves.engine import CurveEngine
-from otjax.curves.reconstruct import vertex_and_edge_masses
+from otjax.curves.plan_result import vertex_and_edge_masses
 from otjax.curves.triangulation import Triangulation
 from otjax.decimation.sampling import IndependentSet, LiveVertices, lock_set, sample_half_edges
 from tests.curves.helpers import check_scratch, free_vertices, make_engine, noisy_shape, run_queue, scratch_cost

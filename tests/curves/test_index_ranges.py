@@ -10,7 +10,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from otjax.curves import cost
+from otjax.curves import mass_before
 from otjax.validation import MAX_POINTS, check_points
 
 I32 = np.iinfo(np.int32).max
@@ -30,7 +30,7 @@ I64 = np.iinfo(np.int64).max
     ],
 )
 def test_exact_key_type_at_its_boundaries(num_bins, n, x64, expected):
-    assert cost.exact_key_type(num_bins, n, x64) == expected
+    assert mass_before.exact_key_type(num_bins, n, x64) == expected
     if expected is not None:
         assert num_bins * n * n - 1 <= np.iinfo(expected).max
 
@@ -46,7 +46,7 @@ def _sorts_in(jaxpr) -> list:
     return found
 
 
-def _trace(n, num_bins, fn=cost.sort_order):
+def _trace(n, num_bins, fn=mass_before.sort_order):
     """The jaxpr of ``fn`` on ``n`` points (abstract: nothing of size ``n`` exists)."""
     args = (jax.ShapeDtypeStruct((n,), jnp.int32), jax.ShapeDtypeStruct((n,), jnp.float64))
     with jax.enable_x64(True):
@@ -64,7 +64,7 @@ def test_a_key_past_int64_sorts_by_two_keys(n):
 
 def test_a_key_within_int64_stays_packed():
     """At the int64 boundary itself the packed key is used, one operand."""
-    sorts = _sorts_in(_trace(2**21, 2**21, cost._sort_order_exact))
+    sorts = _sorts_in(_trace(2**21, 2**21, mass_before._sort_order_exact))
     assert sorts and all(len(s.invars) == 1 and s.invars[0].aval.dtype == jnp.int64 for s in sorts)
 
 
@@ -83,9 +83,9 @@ def test_every_exact_path_sorts_like_a_lexsort(force, monkeypatch, rng):
     edge = rng.integers(0, bins, n)
     t = rng.choice(np.array([-1.5, -0.0, 0.0, 2.5, 5e-324, 1e300]), n)  # ties, signed zeros, a subnormal
     key_type = {"lex": None, "int32": jnp.int32, "int64": jnp.int64}[force]
-    monkeypatch.setattr(cost, "exact_key_type", lambda *args: key_type)
+    monkeypatch.setattr(mass_before, "exact_key_type", lambda *args: key_type)
     with jax.enable_x64(True):
-        got = np.asarray(cost._sort_order_exact(jnp.asarray(edge, jnp.int32), jnp.asarray(t), bins))
+        got = np.asarray(mass_before._sort_order_exact(jnp.asarray(edge, jnp.int32), jnp.asarray(t), bins))
     expected = np.lexsort((np.arange(n), t + 0.0, edge))
     np.testing.assert_array_equal(got, expected)
 
