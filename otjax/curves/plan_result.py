@@ -71,7 +71,9 @@ def result_from_plan(plan: TransportPlan, relevance: float, params: dict, second
     endpoints, and isolated vertices (vertices that receive mass but lie on
     no kept edge). Vertices are numbered in increasing internal id. The
     pinned box corners and every edge touching them are scaffolding and
-    never appear.
+    never appear; the shape end of a scaffolding edge that carries mass
+    counts as receiving it, so a run decimated to a few vertices whose
+    points all sit on edges towards the box still reports those vertices.
     """
     tri = plan.tri
     edge_mass, vertex_mass = vertex_and_edge_masses(plan)
@@ -80,11 +82,17 @@ def result_from_plan(plan: TransportPlan, relevance: float, params: dict, second
         points = _points_of(plan, kept.keys)
         kept = kept.where(filtering.redundant_chords(kept.keys, tri.xy, points, plan.points, plan.mass))
     on_edges = kept.vertices()
-    isolated = sorted(v for v, m in vertex_mass.items() if m > 0 and v not in on_edges and not tri.pinned[v])
+    received = set(v for v, m in vertex_mass.items() if m > 0) | _scaffolding_ends(tri.pinned, edge_mass)
+    isolated = sorted(v for v in received if v not in on_edges and not tri.pinned[v])
     if background is not None and background.found and (kept.keys or isolated):
         kept, isolated = _above_background(plan, kept, isolated, background,
                                            plan.mass if input_mass is None else input_mass)
     return _packed(plan, kept, isolated, params, seconds)
+
+
+def _scaffolding_ends(pinned: np.ndarray, edge_mass: dict) -> set:
+    """The unpinned ends of edges to a pinned box corner that carry mass."""
+    return {b if pinned[a] else a for (a, b), m in edge_mass.items() if m > 0 and pinned[a] != pinned[b]}
 
 
 class KeptEdges(NamedTuple):

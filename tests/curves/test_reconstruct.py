@@ -350,3 +350,14 @@ def test_image_input_recovers_the_drawing():
 def test_bad_parameters_are_named(bad, message):
     with pytest.raises(ValueError, match=message):
         otjax.reconstruct_curve(small_case(), **bad)
+
+
+@pytest.mark.parametrize("queue", ["exhaustive", "parallel"])
+def test_a_vertex_whose_points_sit_on_edges_to_the_box_is_reported(queue):
+    """Three points decimated to one vertex: their mass goes onto edges towards the pinned box
+    corners (scaffolding, never output); the vertex at their end must still be in the result."""
+    points = np.array([[0.0, 0.0], [0.0, 4.0], [1.0, 2.0]])
+    r = otjax.reconstruct_curve(points, n_vertices=1, queue=queue, background="none")
+    assert len(r.vertices) == 1 and r.isolated.tolist() == [0] and len(r.edges) == 0
+    diameter = np.linalg.norm(points.max(0) - points.min(0))
+    assert np.linalg.norm(r.vertices[0] - points.mean(0)) < diameter  # near the points, not a box corner
