@@ -1,0 +1,7 @@
+"""notebooks/gradient_relocation.ipynb runs top to bottom at its small size."""
+
+from tests.notebooks.runner import run_notebook
+
+
+def test_runs_top_to_bottom(monkeypatch):
+    run_notebook("gradient_relocation.ipynb", monkeypatch)
