@@ -45,7 +45,7 @@ from otjax.surfaces.plan import BinSettings, SurfacePlan
 from otjax.surfaces.relaxation import RelaxationStats, relax
 from otjax.surfaces.relocation import relocate
 from otjax.surfaces.solvers import LocalSolver
-from otjax.validation import _as_float_array, check_points
+from otjax.validation import _as_float_array, check_number, check_points
 
 #: Default relative density (a multiple of the mean facet density) below which
 #: a facet is dropped (docs/decisions.md#feature_recovery).
@@ -175,21 +175,31 @@ def check_placement(points: np.ndarray, vertices: np.ndarray, triangles: np.ndar
     """Raises ValueError if the points are at another scale than the mesh
     (:data:`SCALE_RATIO`) or far from it (:data:`FAR`)."""
     used = vertices[np.unique(triangles)]
+    # Both scaled by one power of two, so that norms of coordinates near the
+    # ends of float64's range neither overflow nor lose their ratio.
+    exponent = int(np.frexp(max(np.abs(used).max(), np.abs(points).max()))[1])
+    used, points, vertices = (np.ldexp(a, -exponent) for a in (used, points, vertices))
+
+    def out(length):  # a canonical length in the input's units, for the message
+        with np.errstate(over="ignore"):
+            return float(np.ldexp(length, exponent))
+
     d_mesh = float(np.linalg.norm(np.ptp(used, axis=0)))
     d_points = float(np.linalg.norm(np.ptp(points, axis=0)))
-    ratio = d_points / d_mesh
+    ratio = d_points / d_mesh if d_mesh > 0 else float("inf")  # 0 here: the mesh is 2^-1000 of the points
     if not 1 / SCALE_RATIO <= ratio <= SCALE_RATIO:
         raise ValueError(
-            f"the points and the mesh are at different scales: bounding-box diagonals {d_points:.4g} and "
-            f"{d_mesh:.4g} (ratio {ratio:.3g}, more than {SCALE_RATIO:g}); are they in the same units?")
+            f"the points and the mesh are at different scales: bounding-box diagonals {out(d_points):.4g} and "
+            f"{out(d_mesh):.4g} (ratio {ratio:.3g}, more than {SCALE_RATIO:g}); are they in the same units?")
     edges = vertices[triangles] - vertices[np.roll(triangles, 1, axis=1)]
     edge = float(np.median(np.linalg.norm(edges, axis=2)))
     distance, _ = scipy.spatial.cKDTree(used).query(points)
     median = float(np.median(distance))
     if median > FAR * d_mesh + edge:
         raise ValueError(
-            f"the points are far from the mesh: their median distance to the nearest mesh vertex is {median:.4g}, "
-            f"more than {FAR:g} of the mesh's diagonal plus its median edge ({FAR * d_mesh + edge:.4g}); "
+            f"the points are far from the mesh: their median distance to the nearest mesh vertex is "
+            f"{out(median):.4g}, more than {FAR:g} of the mesh's diagonal plus its median edge "
+            f"({out(FAR * d_mesh + edge):.4g}); "
             "are they in the same coordinate frame?")
 
 
@@ -320,6 +330,7 @@ def recover_features(points, vertices, triangles, masses=None, *, passes: int = 
     if solver not in ("exact", "batched", "auto"):
         raise ValueError(f"solver must be 'exact', 'batched' or 'auto', got {solver!r}")
     threshold = check_threshold(density_threshold)
+    seed = check_number("seed", seed, integer=True)
     given = validate_input(points, vertices, triangles, masses)
     frame, q, m = to_canonical(given.points, given.masses)
     solve = LocalSolver(solver)

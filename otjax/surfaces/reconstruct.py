@@ -103,6 +103,7 @@ def reconstruct_surface(points, masses=None, n_vertices: int = 100, *, queue: st
     """
     t0 = time.perf_counter()
     points, masses = _checked(points, masses, n_vertices, queue, choices, switch_factor, solver, fraction)
+    seed = check_number("seed", seed, integer=True)
     if masses is not None and np.any(masses <= 0):
         raise ValueError(f"masses must be > 0: {int(np.sum(masses <= 0))} are not")
     frame, q, m = to_canonical(points, masses)
