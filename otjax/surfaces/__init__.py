@@ -13,6 +13,9 @@ simplicial complex, for research code and notebooks.
   ``"batched"`` JAX Newton, ``"auto"``) behind one call.
 - :func:`initial_complex` -- 3D Delaunay of a random subset, relaxation,
   facets with mass (§4.1).
+- :func:`reconstruct_surface` -- points to a decimated complex (§4):
+  the initial complex, collapses scored in batches of local LPs by a
+  :class:`SurfaceEngine` on the shared decimation loop.
 - :func:`relocate`, :func:`relocation_targets`, :func:`refine` -- vertex
   relocation (§4.3): closed-form targets with the plan fixed, damped moves
   with local re-solves, gradient refinement.
@@ -30,11 +33,13 @@ The LP layer itself (padded batches, solvers, statuses) is :mod:`otjax.lp`.
 
 from otjax.surfaces.bins import FacetBins, bin_positions, facet_bins
 from otjax.surfaces.complex import CollapseChange, ComplexArrays, LocalComplex, SimplicialComplex
+from otjax.surfaces.engine import SurfaceEngine
 from otjax.surfaces.features import FeatureRecovery, PassStats, recover_features
 from otjax.surfaces.filtering import FacetDensity, FilteredComplex, facet_density, filter_facets
 from otjax.surfaces.initial_complex import InitialComplex, initial_complex, initial_settings
 from otjax.surfaces.plan import BinSettings, Stencil, SurfacePlan
 from otjax.surfaces.plot import plan_segments, plot_complex
+from otjax.surfaces.reconstruct import SurfaceReconstruction, reconstruct_surface
 from otjax.surfaces.relaxation import LocalSolution, RelaxationStats, facet_ring, relax
 from otjax.surfaces.relocation import RefineStats, RelocationStats, refine, relocate, relocation_targets
 from otjax.surfaces.result import SurfaceResult
@@ -43,7 +48,8 @@ from otjax.surfaces.solvers import LocalSolver, exact_solver
 __all__ = [
     "BinSettings", "CollapseChange", "ComplexArrays", "FacetBins", "FacetDensity", "FeatureRecovery", "FilteredComplex",
     "InitialComplex", "LocalComplex", "LocalSolution", "LocalSolver", "PassStats", "RefineStats", "RelaxationStats",
-    "RelocationStats", "SimplicialComplex", "Stencil", "SurfacePlan", "SurfaceResult", "bin_positions",
+    "RelocationStats", "SimplicialComplex", "Stencil", "SurfaceEngine", "SurfacePlan", "SurfaceReconstruction",
+    "SurfaceResult", "bin_positions",
     "exact_solver", "facet_bins", "facet_density", "facet_ring", "filter_facets", "initial_complex",
-    "initial_settings", "plan_segments", "plot_complex", "recover_features", "refine", "relax", "relocate", "relocation_targets",
+    "initial_settings", "plan_segments", "plot_complex", "reconstruct_surface", "recover_features", "refine", "relax", "relocate", "relocation_targets",
 ]
