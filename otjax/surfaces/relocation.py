@@ -120,18 +120,29 @@ class RefineStats(NamedTuple):
 
 
 # ---------------------------------------------------------------- packing
-def _simplex_entries(plan: SurfacePlan, simplex):
-    """``(point, corners (n, 3), barycentric (n, 3), mass)`` of one simplex, or None."""
+class SimplexEntries(NamedTuple):
+    """The entries of one simplex: ``point (n,)``, bin ``corners (n, 3)`` and
+    ``barycentric (n, 3)`` coordinates (a vertex bin: corners all the vertex,
+    weights ``(1, 0, 0)``), ``mass (n,)``."""
+
+    point: np.ndarray
+    corners: np.ndarray
+    barycentric: np.ndarray
+    mass: np.ndarray
+
+
+def _simplex_entries(plan: SurfacePlan, simplex) -> SimplexEntries | None:
+    """The :class:`SimplexEntries` of one simplex, or None when it has none."""
     e = plan.entries(simplex)
     if e is None:
         return None
     n = len(e.point)
     if isinstance(simplex, tuple):
         corners = np.broadcast_to(np.array(simplex, np.int64), (n, 3))
-        return e.point, corners, plan.bins[simplex].barycentric[e.bin], e.mass
+        return SimplexEntries(e.point, corners, plan.bins[simplex].barycentric[e.bin], e.mass)
     bary = np.zeros((n, 3))
     bary[:, 0] = 1.0
-    return e.point, np.full((n, 3), int(simplex), np.int64), bary, e.mass
+    return SimplexEntries(e.point, np.full((n, 3), int(simplex), np.int64), bary, e.mass)
 
 
 def pack_entries(plan: SurfacePlan, simplices: Sequence, vertices: Sequence[int] = ()) -> PackedEntries:
@@ -150,8 +161,8 @@ def pack_entries(plan: SurfacePlan, simplices: Sequence, vertices: Sequence[int]
     found = (_simplex_entries(plan, x) for x in simplices)
     parts = [(s, got) for s, got in enumerate(found) if got is not None]
     if parts:
-        point, corners, bary, mass = (np.concatenate([g[k] for _, g in parts]) for k in range(4))
-        segment = np.concatenate([np.full(len(g[0]), s, np.int64) for s, g in parts])
+        point, corners, bary, mass = (np.concatenate(column) for column in zip(*(g for _, g in parts)))
+        segment = np.concatenate([np.full(len(g.point), s, np.int64) for s, g in parts])
     else:
         point, corners = np.zeros(0, np.int64), np.zeros((0, 3), np.int64)
         bary, mass, segment = np.zeros((0, 3)), np.zeros(0), np.zeros(0, np.int64)
