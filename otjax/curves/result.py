@@ -20,6 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from otjax.io import atomic_write
+from otjax.result_fields import float_array, index_array, plain_json
 
 # A wrong type is a ValueError too, not a TypeError (the noqa: TRY004 below): DESIGN.md
 # promises one exception type for bad input, which is what the CLI catches.
@@ -54,67 +55,6 @@ def check_save_path(path) -> Path:
             f"{path}: unknown output extension {path.suffix!r}; expected one of {', '.join(SAVE_EXTENSIONS)}"
         )
     return path
-
-
-def _plain(value, where: str):
-    """``value`` as plain JSON types (NumPy scalars and arrays, tuples, paths converted)."""
-    if isinstance(value, np.ndarray):
-        return _plain(value.tolist(), where)
-    if isinstance(value, np.generic):
-        return _plain(value.item(), where)
-    if value is None or isinstance(value, (bool, str)):
-        return value
-    if isinstance(value, numbers.Integral):
-        return int(value)
-    if isinstance(value, numbers.Real):
-        value = float(value)
-        if not math.isfinite(value):  # NaN and inf are not JSON
-            raise ValueError(f"{where} is {value}, which JSON cannot hold")
-        return value
-    if isinstance(value, Path):
-        return str(value)
-    if isinstance(value, dict):
-        return {str(k): _plain(v, f"{where}[{k!r}]") for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_plain(v, f"{where}[{i}]") for i, v in enumerate(value)]
-    raise ValueError(f"{where} of type {type(value).__name__} is not JSON-serialisable")
-
-
-def _float_array(value, name: str, shape: tuple) -> np.ndarray:
-    """A finite float64 array of the given shape (``-1`` = any length)."""
-    try:
-        arr = np.asarray(value)
-        if arr.dtype.kind not in "iuf" and arr.size:
-            raise TypeError
-        arr = arr.astype(np.float64)
-    except (TypeError, ValueError):
-        raise ValueError(f"{name} must be an array of numbers") from None
-    if arr.size == 0:
-        arr = arr.reshape([0 if s == -1 else s for s in shape])
-    if arr.ndim != len(shape) or any(s not in (-1, a) for s, a in zip(shape, arr.shape)):
-        want = (
-            "("
-            + ", ".join("n" if s == -1 else str(s) for s in shape)
-            + ("," if len(shape) == 1 else "")
-            + ")"
-        )
-        raise ValueError(f"{name} must have shape {want}, got shape {arr.shape}")
-    if not np.isfinite(arr).all():
-        raise ValueError(f"{name} contains NaN or inf")
-    return arr
-
-
-def _index_array(value, name: str, shape: tuple, n_vertices: int) -> np.ndarray:
-    """An int64 array of indices into ``n_vertices`` vertices, of the given shape."""
-    arr = np.asarray(value)
-    if arr.size and arr.dtype.kind not in "iu":
-        raise ValueError(f"{name} must hold integer indices, got dtype {arr.dtype}")
-    arr = _float_array(arr if arr.size else np.zeros(0), name, shape).astype(np.int64)
-    if arr.size and (arr.min() < 0 or arr.max() >= n_vertices):
-        raise ValueError(
-            f"{name} index out of range: indices must be in [0, {n_vertices}), got {arr.min()}..{arr.max()}"
-        )
-    return arr
 
 
 @dataclass(eq=False)
@@ -157,15 +97,15 @@ class CurveResult:
     def __post_init__(self):
         # Coerce and check once here, so that every result (built by the
         # library or loaded from a file) serialises without surprises.
-        self.vertices = _float_array(self.vertices, "vertices", (-1, 2))
+        self.vertices = float_array(self.vertices, "vertices", (-1, 2))
         k = len(self.vertices)
-        self.edges = _index_array(self.edges, "edges", (-1, 2), k)
+        self.edges = index_array(self.edges, "edges", (-1, 2), k)
         if self.edges.size and np.any(self.edges[:, 0] == self.edges[:, 1]):
             raise ValueError("edges must join two different vertices")
-        self.isolated = _index_array(self.isolated, "isolated", (-1,), k)
+        self.isolated = index_array(self.isolated, "isolated", (-1,), k)
         m = len(self.edges)
-        self.edge_mass = _float_array(self.edge_mass, "edge_mass", (m,))
-        self.edge_relevance = _float_array(self.edge_relevance, "edge_relevance", (m,))
+        self.edge_mass = float_array(self.edge_mass, "edge_mass", (m,))
+        self.edge_relevance = float_array(self.edge_relevance, "edge_relevance", (m,))
         for name in ("total_cost", "seconds"):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, numbers.Real) or not math.isfinite(value):
@@ -176,10 +116,10 @@ class CurveResult:
         if not isinstance(self.params, dict):
             raise ValueError(f"params must be a dict, got {type(self.params).__name__}")  # noqa: TRY004
         if self.points is not None:
-            self.points = _float_array(self.points, "points", (-1, 2))
+            self.points = float_array(self.points, "points", (-1, 2))
         if self.masses is not None:
             n = -1 if self.points is None else len(self.points)
-            self.masses = _float_array(self.masses, "masses", (n,))
+            self.masses = float_array(self.masses, "masses", (n,))
 
     # --- filtering ----------------------------------------------------------
 
@@ -227,7 +167,7 @@ class CurveResult:
             "edge_mass": self.edge_mass.tolist(),
             "edge_relevance": self.edge_relevance.tolist(),
             "total_cost": self.total_cost,
-            "params": _plain(self.params, "params"),
+            "params": plain_json(self.params, "params"),
             "seconds": self.seconds,
         }
 

@@ -19,6 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from otjax.io import check_output_paths, write_files
+from otjax.result_fields import float_array, index_array, plain_json
 from otjax.surfaces import mesh_files
 from otjax.surfaces.filtering import check_threshold, facet_density, filter_facets
 
@@ -31,55 +32,6 @@ def json_schema() -> dict:
     """The JSON Schema (draft 2020-12) of :meth:`SurfaceResult.to_dict`."""
     text = resources.files("otjax.surfaces").joinpath("surface_result.schema.json").read_text(encoding="utf-8")
     return json.loads(text)
-
-
-def _floats(value, name: str, shape: tuple) -> np.ndarray:
-    """A finite float64 array of ``shape`` (``-1``: any length)."""
-    arr = np.asarray([] if value is None else value)
-    if arr.size and arr.dtype.kind not in "iuf":
-        raise ValueError(f"{name} must be an array of numbers, got dtype {arr.dtype}")
-    arr = arr.astype(np.float64)
-    if arr.size == 0:
-        arr = arr.reshape([0 if s == -1 else s for s in shape])
-    if arr.ndim != len(shape) or any(s not in (-1, a) for s, a in zip(shape, arr.shape)):
-        want = "(" + ", ".join("n" if s == -1 else str(s) for s in shape) + ("," if len(shape) == 1 else "") + ")"
-        raise ValueError(f"{name} must have shape {want}, got shape {arr.shape}")
-    if not np.isfinite(arr).all():
-        raise ValueError(f"{name} contains NaN or inf")
-    return arr
-
-
-def _indices(value, name: str, shape: tuple, n: int) -> np.ndarray:
-    arr = np.asarray([] if value is None else value)
-    if arr.size and arr.dtype.kind not in "iu":
-        raise ValueError(f"{name} must hold integer indices, got dtype {arr.dtype}")
-    arr = _floats(arr, name, shape).astype(np.int64)
-    if arr.size and (arr.min() < 0 or arr.max() >= n):
-        raise ValueError(f"{name} index out of range: indices must be in [0, {n}), got {arr.min()}..{arr.max()}")
-    return arr
-
-
-def _plain(value, where: str):
-    """``value`` as plain JSON types (NumPy scalars and arrays, tuples, paths converted)."""
-    if isinstance(value, np.ndarray):
-        return _plain(value.tolist(), where)
-    if isinstance(value, np.generic):
-        return _plain(value.item(), where)
-    if value is None or isinstance(value, (bool, str)):
-        return value
-    if isinstance(value, numbers.Integral):
-        return int(value)
-    if isinstance(value, numbers.Real):
-        if not math.isfinite(value):
-            raise ValueError(f"{where} is {value}, which JSON cannot hold")
-        return float(value)
-    if isinstance(value, Path):
-        return str(value)
-    if isinstance(value, dict):
-        return {str(k): _plain(v, f"{where}[{k!r}]") for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_plain(v, f"{where}[{i}]") for i, v in enumerate(value)]
-    raise ValueError(f"{where} of type {type(value).__name__} is not JSON-serialisable")
 
 
 @dataclass(eq=False)
@@ -124,18 +76,18 @@ class SurfaceResult:
     stats: object = None
 
     def __post_init__(self):
-        self.vertices = _floats(self.vertices, "vertices", (-1, 3))
+        self.vertices = float_array(self.vertices, "vertices", (-1, 3))
         n = len(self.vertices)
-        self.triangles = _indices(self.triangles, "triangles", (-1, 3), n)
+        self.triangles = index_array(self.triangles, "triangles", (-1, 3), n)
         if self.triangles.size and np.any(np.diff(np.sort(self.triangles, axis=1), axis=1) == 0):
             raise ValueError("triangles must have three different vertices")
-        self.edges = _indices(self.edges, "edges", (-1, 2), n)
+        self.edges = index_array(self.edges, "edges", (-1, 2), n)
         if self.edges.size and np.any(self.edges[:, 0] == self.edges[:, 1]):
             raise ValueError("edges must join two different vertices")
-        self.isolated = _indices(self.isolated, "isolated", (-1,), n)
-        self.triangle_mass = _floats(self.triangle_mass, "triangle_mass", (len(self.triangles),))
+        self.isolated = index_array(self.isolated, "isolated", (-1,), n)
+        self.triangle_mass = float_array(self.triangle_mass, "triangle_mass", (len(self.triangles),))
         if self.vertex_mass is not None:
-            self.vertex_mass = _floats(self.vertex_mass, "vertex_mass", (n,))
+            self.vertex_mass = float_array(self.vertex_mass, "vertex_mass", (n,))
         for name in ("triangle_mass", "vertex_mass"):
             value = getattr(self, name)
             if value is not None and np.any(value < 0):
@@ -149,9 +101,9 @@ class SurfaceResult:
         if not isinstance(self.params, dict):
             raise ValueError(f"params must be a dict, got {type(self.params).__name__}")  # noqa: TRY004
         if self.points is not None:
-            self.points = _floats(self.points, "points", (-1, 3))
+            self.points = float_array(self.points, "points", (-1, 3))
         if self.masses is not None:
-            self.masses = _floats(self.masses, "masses", (-1 if self.points is None else len(self.points),))
+            self.masses = float_array(self.masses, "masses", (-1 if self.points is None else len(self.points),))
         self.density = facet_density(self.vertices, self.triangles, self.triangle_mass)
         self.triangle_area = self.density.area
         self.triangle_density = self.density.density
@@ -197,7 +149,7 @@ class SurfaceResult:
             "isolated": self.isolated.tolist(),
             "vertex_mass": None if self.vertex_mass is None else self.vertex_mass.tolist(),
             "triangle_mass": self.triangle_mass.tolist(), "triangle_density": self.triangle_density.tolist(),
-            "total_cost": self.total_cost, "params": _plain(self.params, "params"), "seconds": self.seconds,
+            "total_cost": self.total_cost, "params": plain_json(self.params, "params"), "seconds": self.seconds,
         }
 
     def to_json(self, indent: int | None = None) -> str:
@@ -222,7 +174,7 @@ class SurfaceResult:
         if unknown:
             raise ValueError(f"surface result has unknown key(s): {', '.join(map(str, unknown))}")
         result = cls(**{k: d[k] for k in JSON_KEYS if k != "triangle_density"})
-        stored = _floats(d["triangle_density"], "triangle_density", (len(result.triangles),))
+        stored = float_array(d["triangle_density"], "triangle_density", (len(result.triangles),))
         if not np.allclose(stored, result.triangle_density, rtol=1e-9, atol=0):
             raise ValueError("triangle_density does not match triangle_mass / triangle area")
         return result
