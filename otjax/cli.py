@@ -2,7 +2,9 @@
 
 ``otjax curve INPUT -n N -o out.json -o out.svg`` reconstructs a curve from a
 point file or a grayscale image; ``otjax curve --example star`` runs on a
-built-in synthetic shape, so the command works with no data at all.
+built-in synthetic shape, so the command works with no data at all. The
+surface commands, ``otjax surface`` and ``otjax recover``, are in
+:mod:`otjax.cli_surfaces`.
 
 Bad input (unreadable file, NaN, duplicates, too many vertices, unknown output
 extension, missing output directory, ...) ends with one line ``otjax: error:
@@ -18,6 +20,7 @@ import argparse
 import sys
 
 from otjax import datasets
+from otjax.cli_surfaces import add_surface_parsers
 from otjax.compile_cache import default_cache_dir, enable_compilation_cache
 from otjax.curves.decimate import QUEUES
 from otjax.curves.reconstruct import reconstruct_curve
@@ -106,13 +109,14 @@ def _curve_parser(sub) -> argparse.ArgumentParser:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    """The ``otjax`` argument parser (subcommands: ``curve``)."""
+    """The ``otjax`` argument parser (subcommands: ``curve``, ``surface``, ``recover``)."""
     from otjax import __version__
 
     parser = argparse.ArgumentParser(prog="otjax", description="Shape reconstruction by optimal transport.")
     parser.add_argument("--version", action="version", version=f"otjax {__version__}")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     _curve_parser(sub)
+    add_surface_parsers(sub)
     return parser
 
 

@@ -44,6 +44,7 @@ from otjax.surfaces.filtering import check_threshold, facet_density, keep_facets
 from otjax.surfaces.plan import BinSettings, SurfacePlan
 from otjax.surfaces.relaxation import RelaxationStats, relax
 from otjax.surfaces.relocation import relocate
+from otjax.surfaces.result import SurfaceResult
 from otjax.surfaces.solvers import LocalSolver
 from otjax.validation import _as_float_array, check_number, check_points
 
@@ -116,6 +117,12 @@ class FeatureRecovery(NamedTuple):
     relaxation: RelaxationStats
     plan: SurfacePlan
     frame: Frame
+
+    def to_result(self, params: dict | None = None) -> SurfaceResult:
+        """The kept faces as a :class:`SurfaceResult` (files, plots); ``params`` are recorded with it."""
+        return SurfaceResult(vertices=self.vertices, triangles=self.triangles,
+                             triangle_mass=self.triangle_mass[self.keep], total_cost=self.cost_after,
+                             params=dict(params or {}), stats=self.passes)
 
 
 class CheckedInput(NamedTuple):

@@ -22,6 +22,7 @@ from otjax.surfaces.engine import SurfaceEngine
 from otjax.surfaces.initial_complex import FRACTION, initial_complex
 from otjax.surfaces.plan import BinSettings, Entries, SurfacePlan
 from otjax.surfaces.relaxation import relax
+from otjax.surfaces.result import SurfaceResult
 from otjax.surfaces.solvers import LocalSolver
 from otjax.validation import check_number, check_points, check_target
 
@@ -66,6 +67,14 @@ class SurfaceReconstruction(NamedTuple):
     vertex_ids: np.ndarray
     stats: DecimationStats
     seconds: dict
+
+    def to_result(self, params: dict | None = None) -> SurfaceResult:
+        """The user-facing :class:`SurfaceResult` (files, plots, density
+        filtering) of these arrays; ``params`` are recorded with it."""
+        return SurfaceResult(vertices=self.vertices, triangles=self.triangles, triangle_mass=self.triangle_mass,
+                             edges=self.edges, isolated=self.isolated, total_cost=self.total_cost,
+                             params={**(params or {}), "cost_exponent": self.cost_exponent},
+                             seconds=float(sum(self.seconds.values())), stats=self.stats)
 
 
 def reconstruct_surface(points, masses=None, n_vertices: int = 100, *, queue: str = "multiple-choice",
