@@ -20,6 +20,6 @@ demo: install
 # The layer rules (pyproject.toml's import-linter contracts), then the suite.
 test: install
 	$(BIN)/lint-imports --no-cache
-	$(BIN)/python -m pytest -q -n 2 --dist loadfile
+	$(BIN)/python -m pytest -q -n 2 --dist loadfile --durations=20
 
 .PHONY: install demo test
