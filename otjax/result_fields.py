@@ -3,6 +3,7 @@ every dimension (:class:`otjax.CurveResult`, :class:`otjax.surfaces.SurfaceResul
 
 from __future__ import annotations
 
+import json
 import math
 import numbers
 from pathlib import Path
@@ -74,3 +75,33 @@ def plain_json(value, where: str):
     if isinstance(value, (list, tuple)):
         return [plain_json(v, f"{where}[{i}]") for i, v in enumerate(value)]
     raise ValueError(f"{where} of type {type(value).__name__} is not JSON-serialisable")
+
+
+def check_json_keys(d, keys, what: str) -> None:
+    """Raises ValueError unless ``d`` is a dict with exactly ``keys`` (``what``: e.g. ``"curve result"``)."""
+    if not isinstance(d, dict):
+        raise ValueError(f"a {what} must be a JSON object, got {type(d).__name__}")  # noqa: TRY004
+    missing = [k for k in keys if k not in d]
+    if missing:
+        raise ValueError(f"{what} is missing key(s): {', '.join(missing)}")
+    unknown = sorted(set(d) - set(keys))
+    if unknown:
+        raise ValueError(f"{what} has unknown key(s): {', '.join(map(str, unknown))}")
+
+
+def load_json(path, from_dict):
+    """``from_dict`` of the JSON file at ``path``; every failure is a ValueError naming the file."""
+    try:
+        text = Path(path).read_text(encoding="utf-8")
+    except OSError as err:
+        raise ValueError(f"cannot read {path}: {err.strerror or err}") from None
+    except UnicodeDecodeError:
+        raise ValueError(f"{path}: not a UTF-8 text file") from None
+    try:
+        d = json.loads(text)
+    except json.JSONDecodeError as err:
+        raise ValueError(f"{path}: not valid JSON ({err})") from None
+    try:
+        return from_dict(d)
+    except ValueError as err:
+        raise ValueError(f"{path}: {err}") from None

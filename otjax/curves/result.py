@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from otjax.io import atomic_write
-from otjax.result_fields import float_array, index_array, plain_json
+from otjax.result_fields import check_json_keys, float_array, index_array, load_json, plain_json
 
 # A wrong type is a ValueError too, not a TypeError (the noqa: TRY004 below): DESIGN.md
 # promises one exception type for bad input, which is what the CLI catches.
@@ -183,33 +183,13 @@ class CurveResult:
           ValueError: a key missing or unknown, a wrong type or shape, an index
             out of range, or lengths that do not match.
         """
-        if not isinstance(d, dict):
-            raise ValueError(f"a curve result must be a JSON object, got {type(d).__name__}")  # noqa: TRY004
-        missing = [k for k in JSON_KEYS if k not in d]
-        if missing:
-            raise ValueError(f"curve result is missing key(s): {', '.join(missing)}")
-        unknown = sorted(set(d) - set(JSON_KEYS))
-        if unknown:
-            raise ValueError(f"curve result has unknown key(s): {', '.join(map(str, unknown))}")
+        check_json_keys(d, JSON_KEYS, "curve result")
         return cls(**{k: d[k] for k in JSON_KEYS})
 
     @classmethod
     def load(cls, path) -> CurveResult:
         """Reads a result saved as ``.json``; ``ValueError`` if unreadable or malformed."""
-        try:
-            text = Path(path).read_text(encoding="utf-8")
-        except OSError as err:
-            raise ValueError(f"cannot read {path}: {err.strerror or err}") from None
-        except UnicodeDecodeError:
-            raise ValueError(f"{path}: not a UTF-8 text file") from None
-        try:
-            d = json.loads(text)
-        except json.JSONDecodeError as err:
-            raise ValueError(f"{path}: not valid JSON ({err})") from None
-        try:
-            return cls.from_dict(d)
-        except ValueError as err:
-            raise ValueError(f"{path}: {err}") from None
+        return load_json(path, cls.from_dict)
 
     # --- files ------------------------------------------------------------
 

@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from otjax.io import check_output_paths, write_files
-from otjax.result_fields import float_array, index_array, plain_json
+from otjax.result_fields import check_json_keys, float_array, index_array, load_json, plain_json
 from otjax.surfaces import mesh_files
 from otjax.surfaces.filtering import check_threshold, facet_density, filter_facets
 
@@ -165,14 +165,7 @@ class SurfaceResult:
             out of range, lengths that differ, densities that do not match
             ``triangle_mass / area``.
         """
-        if not isinstance(d, dict):
-            raise ValueError(f"a surface result must be a JSON object, got {type(d).__name__}")  # noqa: TRY004
-        missing = [k for k in JSON_KEYS if k not in d]
-        if missing:
-            raise ValueError(f"surface result is missing key(s): {', '.join(missing)}")
-        unknown = sorted(set(d) - set(JSON_KEYS))
-        if unknown:
-            raise ValueError(f"surface result has unknown key(s): {', '.join(map(str, unknown))}")
+        check_json_keys(d, JSON_KEYS, "surface result")
         result = cls(**{k: d[k] for k in JSON_KEYS if k != "triangle_density"})
         stored = float_array(d["triangle_density"], "triangle_density", (len(result.triangles),))
         if not np.allclose(stored, result.triangle_density, rtol=1e-9, atol=0):
@@ -182,18 +175,7 @@ class SurfaceResult:
     @classmethod
     def load(cls, path) -> SurfaceResult:
         """Reads a result saved as ``.json``; ``ValueError`` naming the file if unreadable or malformed."""
-        try:
-            text = Path(path).read_text(encoding="utf-8")
-        except OSError as err:
-            raise ValueError(f"cannot read {path}: {err.strerror or err}") from None
-        except UnicodeDecodeError:
-            raise ValueError(f"{path}: not a UTF-8 text file") from None
-        try:
-            return cls.from_dict(json.loads(text))
-        except json.JSONDecodeError as err:
-            raise ValueError(f"{path}: not valid JSON ({err})") from None
-        except ValueError as err:
-            raise ValueError(f"{path}: {err}") from None
+        return load_json(path, cls.from_dict)
 
     # --- files ------------------------------------------------------------
 
