@@ -24,18 +24,26 @@ it does not certify (or for all, ``method="exact"``).
 
 from __future__ import annotations
 
-from typing import NamedTuple, Sequence
+from collections.abc import Sequence
+from typing import NamedTuple
 
 import numpy as np
 
 from otjax.lp.batched import NewtonOptions
 from otjax.lp.exact import MemberSolution, closed_form_solution, solve_member
-from otjax.lp.problem import (CONVERGED, ITERATION_LIMIT, MIN_BINS, MIN_POINTS, LocalLP, capacity_class,
-                              member_plan, pack)
+from otjax.lp.problem import (
+    CONVERGED,
+    ITERATION_LIMIT,
+    MIN_BINS,
+    MIN_POINTS,
+    LocalLP,
+    capacity_class,
+    member_plan,
+    pack,
+)
 from otjax.lp.solve import solve
-from otjax.surfaces.bins import facet_bins
 from otjax.surfaces.complex import SimplicialComplex, Triangle, replace_vertex
-from otjax.surfaces.plan import Bins, Stencil, SurfacePlan
+from otjax.surfaces.plan import Stencil, SurfacePlan
 
 METHODS = ("auto", "exact")
 #: A new facet whose ``2 area / longest edge^2`` (about the sine of its
@@ -138,14 +146,7 @@ def new_facet_bins(plan: SurfacePlan, facets, cache: dict | None = None) -> dict
     keeps them between calls (valid while the vertices do not move)."""
     cache = {} if cache is None else cache
     todo = sorted({f for f in facets if f not in plan.bins and f not in cache})
-    if todo:
-        s = plan.settings
-        made = facet_bins(plan.complex.positions, np.array(todo, np.int64), density=s.density,
-                          min_bins=s.min_bins, max_bins=s.max_bins, diagonal=s.diagonal, seed=s.seed,
-                          max_stretch=s.max_stretch, bin_length=s.bin_length)
-        stops = np.cumsum(made.count)
-        for f, stop, n in zip(todo, stops.tolist(), made.count.tolist()):
-            cache[f] = Bins(made.barycentric[stop - n:stop], made.capacity[stop - n:stop])
+    cache.update(plan.make_bins(todo))
     return {f: cache[f] for f in facets if f not in plan.bins}
 
 

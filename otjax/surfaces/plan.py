@@ -15,15 +15,21 @@ entries of exactly those simplices; nothing else changes.
 
 from __future__ import annotations
 
-from typing import Iterable, NamedTuple, Sequence
+from collections.abc import Iterable, Sequence
+from typing import NamedTuple
 
 import numpy as np
 import scipy.sparse
 import scipy.spatial
 
 from otjax.lp.problem import LocalLP
-from otjax.surfaces.bins import (DEFAULT_DENSITY, DEFAULT_MAX_BINS, DEFAULT_MAX_STRETCH, DEFAULT_MIN_BINS,
-                               facet_bins)
+from otjax.surfaces.bins import (
+    DEFAULT_DENSITY,
+    DEFAULT_MAX_BINS,
+    DEFAULT_MAX_STRETCH,
+    DEFAULT_MIN_BINS,
+    facet_bins,
+)
 from otjax.surfaces.complex import SimplicialComplex, Triangle, triangle_key
 
 #: Plan entries below this fraction of their point's mass on a stencil are
@@ -116,7 +122,7 @@ class SurfacePlan:
 
     @classmethod
     def from_entries(cls, complex_: SimplicialComplex, points: np.ndarray, masses: np.ndarray,
-                     settings: BinSettings, bins: dict, vertex_entries: dict, facet_entries: dict) -> "SurfacePlan":
+                     settings: BinSettings, bins: dict, vertex_entries: dict, facet_entries: dict) -> SurfacePlan:
         """A plan with the given bins and entries (no nearest-vertex start);
         facets of ``complex_`` without bins get them made."""
         plan = cls.__new__(cls)
@@ -133,16 +139,21 @@ class SurfacePlan:
     # ------------------------------------------------------------- bins
     def ensure_bins(self, facets: Iterable[Triangle]) -> None:
         """Makes the bins of the given facets that have none yet (in one call)."""
-        todo = sorted(t for t in facets if t not in self.bins)
+        self.bins.update(self.make_bins(t for t in facets if t not in self.bins))
+
+    def make_bins(self, facets: Iterable[Triangle]) -> dict:
+        """``{facet: Bins}`` of the given facets by the plan's settings, in one
+        :func:`facet_bins` call, at the current vertex positions; the plan is not changed."""
+        todo = sorted(set(facets))
         if not todo:
-            return
+            return {}
         s = self.settings
         made = facet_bins(self.complex.positions, np.array(todo, np.int64), density=s.density,
                           min_bins=s.min_bins, max_bins=s.max_bins, diagonal=s.diagonal, seed=s.seed,
                           max_stretch=s.max_stretch, bin_length=s.bin_length)
         stops = np.cumsum(made.count)
-        for t, stop, n in zip(todo, stops.tolist(), made.count.tolist()):
-            self.bins[t] = Bins(made.barycentric[stop - n:stop], made.capacity[stop - n:stop])
+        return {t: Bins(made.barycentric[stop - n:stop], made.capacity[stop - n:stop])
+                for t, stop, n in zip(todo, stops.tolist(), made.count.tolist())}
 
     def bin_positions(self, facet: Triangle) -> np.ndarray:
         """``(n, 3)`` positions of a facet's bins at the current vertex positions."""
