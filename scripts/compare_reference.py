@@ -13,8 +13,12 @@ Hausdorff distance between the output (edges and isolated vertices) and the
 truth, F1 of the length recall and precision within 2% D, and the number of
 triangles (3-cycles of output edges, which none of these shapes has).
 
-    python scripts/compare_reference.py                        # 6 kinds x 3 seeds
-    python scripts/compare_reference.py --seeds 0 --kinds star-2 skyline --cold
+Speed by size: a noisy star (sigma 1% D) of 1k, 3k, 10k and 20k points to
+10 vertices (50 at 20k), both tools on the same file, one run each.
+
+    python scripts/compare_reference.py                        # 6 kinds x 3 seeds, then the sizes
+    python scripts/compare_reference.py --seeds 0 --kinds star-2 skyline --cold --no-sizes
+    python scripts/compare_reference.py --sizes                # only the sizes
     python scripts/compare_reference.py --json docs/bench/reference.json --markdown table.md
 """
 
@@ -169,6 +173,45 @@ def compare(kinds, seeds, exe: Path, cold: bool, work: Path, cache: Path) -> lis
     return rows
 
 
+SIZES = ((1000, 10), (3000, 10), (10000, 10), (20000, 50))
+
+
+def compare_sizes(sizes, exe: Path, work: Path, cache: Path, cold: bool) -> list[dict]:
+    """Wall seconds of both tools on a noisy star per ``(points, target)``."""
+    from otjax import datasets
+    from otjax.io import write_points
+
+    rows = []
+    for n, target in sizes:
+        points, truth = datasets.star(n, noise=0.01, seed=0)
+        points_file = work / f"star-{n}.xy"
+        write_points(points_file, points)
+        ref = run_reference(exe, points_file, work / "ref.txt", target)
+        ours = run_otjax(points_file, work / "otjax.json", target, 0, cache)
+        row = {"n_points": n, "n_vertices": target, "reference_seconds": ref["wall"],
+               "otjax_seconds": ours["wall"], "otjax_inner_seconds": ours["inner"],
+               "reference_corner_mean": quality(ref, truth)["corner_mean"],
+               "otjax_corner_mean": quality(ours, truth)["corner_mean"]}
+        if cold:
+            row["otjax_cold_seconds"] = run_otjax(points_file, work / "cold.json", target, 0, None)["wall"]
+        rows.append(row)
+        print(f"star {n} -> {target}: reference {row['reference_seconds']:.1f} s | otjax "
+              f"{row['otjax_seconds']:.1f} s", flush=True)
+    return rows
+
+
+def size_table(rows: list[dict]) -> str:
+    """Markdown: wall seconds per size, both tools."""
+    out = ["| noisy star, points → V | reference s | otjax s (warm cache) | otjax s (cold) | "
+           "corner error mean, reference / otjax (% D) |", "| --- | --- | --- | --- | --- |"]
+    for r in rows:
+        cold = f"{r['otjax_cold_seconds']:.1f}" if "otjax_cold_seconds" in r else ""
+        out.append(f"| {r['n_points']} → {r['n_vertices']} | {r['reference_seconds']:.1f} | "
+                   f"{r['otjax_seconds']:.1f} | {cold} | {r['reference_corner_mean']:.2f} / "
+                   f"{r['otjax_corner_mean']:.2f} |")
+    return "\n".join(out)
+
+
 def table(rows: list[dict]) -> str:
     """Markdown: per kind, the mean over seeds of each figure, both tools."""
     out = ["| input | points → V | tool | corner error mean / max (% D) | Hausdorff (% D) | F1@2% | "
@@ -194,6 +237,8 @@ def main(argv=None) -> int:
     ap.add_argument("--kinds", nargs="+", choices=names, default=names)
     ap.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
     ap.add_argument("--cold", action="store_true", help="also time one cold otjax process per kind")
+    ap.add_argument("--sizes", action="store_true", help="only the speed-by-size table")
+    ap.add_argument("--no-sizes", action="store_true", help="only the quality table")
     ap.add_argument("--build-dir", type=Path, help="where the driver is built (default: a temporary directory)")
     ap.add_argument("--json", type=Path, help="write every row here")
     ap.add_argument("--markdown", type=Path, help="write the table here")
@@ -216,14 +261,15 @@ def main(argv=None) -> int:
 
         write_points(tmp / "warm.xy", warm_points)
         run_otjax(tmp / "warm.xy", tmp / "warm.json", kinds[0].n_vertices, 0, cache)
-        rows = compare(kinds, args.seeds, exe, args.cold, tmp, cache)
-    text = table(rows)
+        rows = [] if args.sizes else compare(kinds, args.seeds, exe, args.cold, tmp, cache)
+        by_size = [] if args.no_sizes else compare_sizes(SIZES, exe, tmp, cache, args.cold)
+    text = "\n\n".join(t for t in (table(rows) if rows else "", size_table(by_size) if by_size else "") if t)
     machine = f"{platform.machine()}, {os.cpu_count()} cores, {platform.python_version()}"
     print(f"\nmachine: {machine}\n{text}")
     if args.markdown:
         args.markdown.write_text(text + "\n")
     if args.json:
-        args.json.write_text(json.dumps({"machine": machine, "rows": rows}, indent=1))
+        args.json.write_text(json.dumps({"machine": machine, "rows": rows, "sizes": by_size}, indent=1))
     return 0
 
 

@@ -8,7 +8,7 @@ from __future__ import annotations
 from typing import NamedTuple
 
 import numpy as np
-from scipy.spatial import Delaunay
+from scipy.spatial import Delaunay, cKDTree
 
 from otjax.predicates import in_triangle_perturbed, orient
 
@@ -23,15 +23,11 @@ class InitialTriangles(NamedTuple):
       triangles: ``(T, 3)`` int64 CCW vertex ids.
       neighbours: ``(T, 3)`` int64 triangle across the edge opposite each
         corner (``-1``: the outer boundary).
-      hint: ``(qhull, centre, scale)``: Qhull's point location is a valid
-        hint while the triangles are still its own (triangle ``f`` is its
-        simplex ``f``); any change drops it.
     """
 
     alive: np.ndarray
     triangles: np.ndarray
     neighbours: np.ndarray
-    hint: tuple
 
 
 def delaunay(xy: np.ndarray, pinned: np.ndarray, use: np.ndarray) -> InitialTriangles:
@@ -78,7 +74,7 @@ def delaunay(xy: np.ndarray, pinned: np.ndarray, use: np.ndarray) -> InitialTria
         use = use & ~drop
     else:
         raise RuntimeError("could not build an embedded initial triangulation")
-    return InitialTriangles(use.copy(), simp, nbr, (dt, (lo + hi) / 2, float(np.max(hi - lo))))
+    return InitialTriangles(use.copy(), simp, nbr)
 
 
 def locate_in(tri, points: np.ndarray, faces: list[int]) -> np.ndarray:
@@ -104,16 +100,44 @@ def locate_in(tri, points: np.ndarray, faces: list[int]) -> np.ndarray:
     return np.asarray(faces, np.int64)[hit]
 
 
+def _star_guess(tri, points: np.ndarray) -> np.ndarray:
+    """Per point, a triangle of the star of its nearest live vertex that
+    holds it (exact, perturbed test), or ``-1``.
+
+    The containing triangle almost always has the nearest vertex as a
+    corner; the few points where it does not are left to the caller.
+    Everything is arrays and a k-d tree: no LAPACK call, whose threads
+    fight the kernels' for the cores (Qhull's own location computes a
+    LAPACK transform per triangle).
+    """
+    tris = tri.triangles()
+    fid = np.asarray(tri.triangle_ids(), np.int64)
+    corner = tris.ravel()
+    order = np.argsort(corner, kind="stable")
+    row_of = np.repeat(np.arange(len(tris)), 3)[order]
+    start = np.searchsorted(corner[order], np.arange(len(tri.xy) + 1))
+    live = np.unique(corner)
+    _, nearest = cKDTree(tri.xy[live]).query(points)
+    v = live[nearest]
+    count = start[v + 1] - start[v]
+    point_of = np.repeat(np.arange(len(points)), count)
+    slot = np.arange(len(point_of)) - np.repeat(np.cumsum(count) - count, count)
+    row = row_of[start[v][point_of] + slot]
+    hit = in_triangle_perturbed(tri.xy[tris[row]], points[point_of])
+    out = np.full(len(points), -1, np.int64)
+    # Reversed, so that the first hit of a point is the one that stays.
+    out[point_of[hit][::-1]] = fid[row[hit]][::-1]
+    return out
+
+
 def locate(tri, points: np.ndarray) -> np.ndarray:
     """Triangle holding each perturbed point, over the whole triangulation.
 
-    While the triangles are still Qhull's, its walk gives a guess per
-    point that the exact test confirms; points near an edge, where the
-    floating-point walk and the perturbed rule may disagree, try the
-    guess's three neighbours. Whatever is left (and everything once the
-    triangulation has changed) goes through an exact test against every
-    triangle in chunks: simple, exact and slow, which is fine because the
-    collapse loop never calls it (it relocates locally).
+    Each point is tested against the star of its nearest vertex (a k-d
+    tree query and one vectorised exact test); whatever is left goes
+    through an exact test against every triangle in chunks: simple, exact
+    and slow, which is fine because it is rare and the collapse loop never
+    calls it (it relocates locally).
 
     Args:
       points: ``(n, 2)`` points inside the pinned box.
@@ -122,21 +146,9 @@ def locate(tri, points: np.ndarray) -> np.ndarray:
       ``(n,)`` int64 triangle ids.
     """
     points = np.asarray(points, np.float64).reshape(-1, 2)
-    out = np.full(len(points), -1, np.int64)
-    if tri.hint is not None and len(points):
-        dt, centre, scale = tri.hint
-        guess = np.asarray(dt.find_simplex((points - centre) / scale), np.int64)
-        tris = np.asarray(tri.tri, np.int64)
-        nbr = np.asarray(tri.nbr, np.int64)
-        todo = np.flatnonzero(guess >= 0)
-        for hop in range(4):
-            if not len(todo):
-                break
-            f = guess[todo] if hop == 0 else nbr[guess[todo], hop - 1]
-            ok = f >= 0
-            ok[ok] = in_triangle_perturbed(tri.xy[tris[f[ok]]], points[todo[ok]])
-            out[todo[ok]] = f[ok]
-            todo = todo[~ok]
+    if not len(points):
+        return np.zeros(0, np.int64)
+    out = _star_guess(tri, points)
     rest = np.flatnonzero(out < 0)
     if len(rest):
         ids = tri.triangle_ids()

@@ -69,7 +69,6 @@ class Triangulation:
         """The exact Delaunay of the vertices in ``use`` (:func:`otjax.curves.embedding.delaunay`)."""
         d = embedding.delaunay(self.xy, self.pinned, use)
         self.alive = d.alive
-        self.hint = d.hint
         self.xy_list = self.xy.tolist()  # scalar predicates read Python floats
         self.tri = d.triangles.tolist()
         self.nbr = d.neighbours.tolist()
@@ -223,7 +222,6 @@ class Triangulation:
         if tuple(ring) != plan.ring or tuple(star) != plan.star:
             raise ValueError("stale collapse plan: the star of the source has changed")
         n = len(ring)
-        self.hint = None
         # Boundary edges keep their direction: the region lies on their left.
         outside = {}
         for k in range(n):
@@ -266,7 +264,6 @@ class Triangulation:
         ring, _ = self.star(v)
         if not self.in_kernel_at(ring, p):
             raise ValueError(f"moving vertex {v} to {tuple(p)} would fold a triangle over")
-        self.hint = None
         self.xy[v] = p
         self.xy_list[v] = [float(p[0]), float(p[1])]
 
@@ -285,7 +282,6 @@ class Triangulation:
         t = self.triangles()
         if not (orient(xy[t[:, 0]], xy[t[:, 1]], xy[t[:, 2]]) > 0).all():
             raise ValueError("these positions would fold a triangle over")
-        self.hint = None
         self.xy = xy.copy()
         self.xy_list = self.xy.tolist()
 

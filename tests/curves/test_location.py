@@ -53,3 +53,37 @@ def test_filtered_location_over_chunk_boundaries():
     p = rng.random((n, 2))
     p[::7] = a[::7, 1]  # exactly on a corner: the perturbation decides
     np.testing.assert_array_equal(locate_pairs(*rows(a, p)), in_triangle_perturbed(a, p))
+
+
+@settings(max_examples=examples(100, 1000), deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(kind=st.sampled_from(["uniform", "near_collinear", "clustered", "duplicates", "grid"]),
+       n=st.integers(8, 60), seed=st.integers(0, 10_000), collapses=st.integers(0, 5))
+def test_whole_triangulation_location_equals_the_exact_predicate(kind, n, seed, collapses):
+    """``Triangulation.locate`` (nearest vertex's star, then a full scan)
+    against the exact predicate over every triangle, before and after
+    collapses (which change the stars)."""
+    from otjax.curves.collapse import plan_collapse
+
+    rng = np.random.default_rng(seed)
+    pts = make_points(kind, n, seed)
+    tri = Triangulation(np.unique(pts, axis=0))
+    for _ in range(collapses):
+        free = np.flatnonzero(tri.alive & ~tri.pinned)
+        for v in rng.permutation(free):
+            ring, _ = tri.star(int(v))
+            plans = [plan_collapse(tri, int(v), int(u)) for u in ring]
+            plans = [pl for pl in plans if pl is not None]
+            if plans:
+                tri.collapse(plans[0])
+                break
+    t = tri.triangles()
+    inner_edge = ~(tri.pinned[t[:, 0]] & tri.pinned[t[:, 1]])  # the box's own edges bound the domain
+    mid = (tri.xy[t[inner_edge, 0]] + tri.xy[t[inner_edge, 1]]) / 2
+    span = float(np.ptp(pts, axis=0).max()) or 1.0
+    queries = np.concatenate([tri.xy[tri.alive & ~tri.pinned], mid, pts,
+                              pts + 1e-3 * span * rng.standard_normal(pts.shape)])
+    a, p = all_pairs(tri, queries)
+    inside = in_triangle_perturbed(a, p).reshape(len(queries), len(t))
+    assert (inside.sum(1) == 1).all()
+    ids = np.asarray(tri.triangle_ids())
+    np.testing.assert_array_equal(tri.locate(queries), ids[inside.argmax(1)])
