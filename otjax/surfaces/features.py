@@ -38,14 +38,16 @@ import numpy as np
 import scipy.sparse
 import scipy.spatial
 
+from tqdm.auto import tqdm
+
 from otjax.frame import Frame, to_canonical
-from otjax.surfaces.complex import SimplicialComplex, triangle_key
+from otjax.lp.batched import NewtonOptions
 from otjax.surfaces.filtering import check_threshold, facet_density, keep_facets
 from otjax.surfaces.plan import BinSettings, SurfacePlan
-from otjax.surfaces.relaxation import RelaxationStats, relax
-from otjax.surfaces.relocation import relocate
+from otjax.surfaces.relaxation import RelaxationStats
 from otjax.surfaces.result import SurfaceResult
-from otjax.surfaces.solvers import LocalSolver
+from otjax.surfaces.star_passes import relax_stencils, relocate_class
+from otjax.surfaces.star_plan import StarPlan, distance2_graph
 from otjax.validation import _as_float_array, check_number, check_points
 
 #: Default relative density (a multiple of the mean facet density) below which
@@ -53,6 +55,9 @@ from otjax.validation import _as_float_array, check_number, check_points
 DENSITY_THRESHOLD = 0.1
 #: Passes over the vertices (docs/decisions.md#feature_recovery).
 PASSES = 3
+#: Relaxation sweeps of the initial plan: the passes re-solve every star
+#: again (docs/decisions.md#feature_recovery_batches).
+RELAX_SWEEPS = 10
 #: Points and mesh whose bounding-box diagonals differ by more than this
 #: factor are at different scales (e.g. millimetres against metres).
 SCALE_RATIO = 4.0
@@ -222,7 +227,8 @@ def validate_input(points, vertices, triangles, masses=None) -> CheckedInput:
 
 
 # ------------------------------------------------------------------ colouring
-def star_colouring(triangles: np.ndarray, n_vertices: int, order: np.ndarray) -> list[np.ndarray]:
+def star_colouring(triangles: np.ndarray, n_vertices: int, order: np.ndarray,
+                   graph: scipy.sparse.csr_matrix | None = None) -> list[np.ndarray]:
     """Greedy colouring of the vertices ``order`` so that no two of a colour
     have closed stars sharing a vertex (they are at least 3 edges apart).
 
@@ -231,6 +237,8 @@ def star_colouring(triangles: np.ndarray, n_vertices: int, order: np.ndarray) ->
       n_vertices: ``V``; ids are ``0 .. V-1``.
       order: ``(K,)`` int64 the vertices to colour, in the order they are
         coloured (each takes the smallest colour its distance-2 neighbours lack).
+      graph: the faces' :func:`~otjax.surfaces.star_plan.distance2_graph`, if
+        already made.
 
     Returns:
       The colour classes, each ``(k,)`` int64 in the order of ``order``.
@@ -239,51 +247,76 @@ def star_colouring(triangles: np.ndarray, n_vertices: int, order: np.ndarray) ->
       >>> [c.tolist() for c in star_colouring(np.array([[0, 1, 2], [1, 2, 3]]), 5, np.arange(5))]
       [[0, 4], [1], [2], [3]]
     """
-    t = np.asarray(triangles, np.int64).reshape(-1, 3)
-    a = np.concatenate([t[:, 0], t[:, 1], t[:, 2], t[:, 1], t[:, 2], t[:, 0]])
-    b = np.concatenate([t[:, 1], t[:, 2], t[:, 0], t[:, 0], t[:, 1], t[:, 2]])
-    ring = scipy.sparse.csr_matrix((np.ones(len(a)), (a, b)), shape=(n_vertices, n_vertices))
-    ring = ring + scipy.sparse.identity(n_vertices, format="csr")
-    two = (ring @ ring).tocsr()  # nonzero where the closed stars share a vertex
-    colour = np.full(n_vertices, -1, np.int64)
-    for v in np.asarray(order, np.int64).tolist():
-        taken = colour[two.indices[two.indptr[v]:two.indptr[v + 1]]]
+    two = distance2_graph(triangles, n_vertices) if graph is None else graph
+    return greedy_classes(two, order)
+
+
+def greedy_classes(graph: scipy.sparse.csr_matrix, order: np.ndarray) -> list[np.ndarray]:
+    """Greedy colouring of the rows ``order`` ``(K,)`` of a symmetric conflict
+    ``graph`` ``(n, n)`` (CSR): each takes the smallest colour none of its
+    neighbours has; the classes, each ``(k,)`` int64 in the order of ``order``."""
+    order = np.asarray(order, np.int64)
+    colour = np.full(graph.shape[0], -1, np.int64)
+    indptr, indices = graph.indptr, graph.indices
+    for v in order.tolist():
+        taken = colour[indices[indptr[v]:indptr[v + 1]]]
         used = np.zeros(len(taken) + 1, bool)
         used[taken[(taken >= 0) & (taken <= len(taken))]] = True
         colour[v] = int(np.argmin(used))
-    order = np.asarray(order, np.int64)
     return [order[colour[order] == k] for k in range(int(colour.max(initial=-1)) + 1)]
+
+
+def stencil_classes(conflicts: scipy.sparse.csr_matrix, order: str, rng: np.random.Generator):
+    """``classes_of(rows) -> [(k,) int64]``: the stencils ``rows`` in a fresh
+    random order, as classes with no conflict (``"colouring"``, conflicts:
+    the stencils sharing a vertex) or one by one (``"sequential"``)."""
+
+    def classes_of(rows: np.ndarray) -> list[np.ndarray]:
+        perm = np.asarray(rows, np.int64)[rng.permutation(len(rows))]
+        if order == "sequential":
+            return [perm[i:i + 1] for i in range(len(perm))]
+        return greedy_classes(conflicts, perm)
+
+    return classes_of
 
 
 # --------------------------------------------------------------------- steps
 def initial_plan(frame_vertices: np.ndarray, triangles: np.ndarray, points: np.ndarray, masses: np.ndarray,
-                 solve, seed: int) -> tuple[SurfacePlan, RelaxationStats]:
-    """The relaxed plan of canonical ``points (N, 3)`` onto the mesh (§5): bins
-    on every face, nearest vertex, then :func:`relax` to a local minimum."""
+                 method: str, seed: int, order: str = "colouring",
+                 options: NewtonOptions = NewtonOptions()) -> tuple[StarPlan, RelaxationStats]:
+    """The relaxed plan of canonical ``points (N, 3)`` with ``masses (N,)`` onto
+    the mesh ``frame_vertices (V, 3)``, ``triangles (T, 3)`` (§5): bins on every
+    face, each point on its nearest vertex of a face, then at most
+    :data:`RELAX_SWEEPS` sweeps of re-solves of the paper's facet stencils
+    (:func:`relax_stencils` over :attr:`StarPlan.rings`), in ``order``
+    (classes of stencils with no vertex in common, or one at a time)."""
     settings = BinSettings(diagonal=float(np.linalg.norm(np.ptp(points, axis=0))), seed=seed)
-    plan = SurfacePlan(SimplicialComplex(frame_vertices, triangles), points, masses, settings)
-    return plan, relax(plan, solve, seed=seed)
+    plan = StarPlan(frame_vertices, triangles, points, masses, settings)
+    incidence = plan.rings.incidence(plan.n_vertices)
+    conflicts = (incidence @ incidence.T).tocsr()
+    classes = stencil_classes(conflicts, order, np.random.default_rng(seed))
+    return plan, relax_stencils(plan, plan.rings, classes, method, options, max_sweeps=RELAX_SWEEPS)
 
 
-def relocation_pass(plan: SurfacePlan, solve, order: str, rng: np.random.Generator,
-                    triangles: np.ndarray) -> PassStats:
-    """One pass over the plan's vertices in a random order (canonical costs)."""
+def relocation_pass(plan: StarPlan, method: str, order: str, rng: np.random.Generator,
+                    options: NewtonOptions = NewtonOptions(), bar=None) -> PassStats:
+    """One pass over the plan's face vertices in a random order (canonical costs):
+    each class of ``order`` relocated and re-solved by :func:`relocate_class`.
+    ``bar``: a tqdm bar advanced by the vertices done."""
     t0 = time.perf_counter()
     before = plan.total_cost()
-    alive = np.flatnonzero(plan.complex.alive)
-    perm = alive[rng.permutation(len(alive))]
-    groups = (star_colouring(triangles, len(plan.complex.positions), perm) if order == "colouring"
-              else [perm[i:i + 1] for i in range(len(perm))])
-    tally = np.zeros(4, np.int64)
-    for group in groups:
-        s = relocate(plan, group.tolist(), solve, rounds=1)
-        tally += (s.accepted, s.rejected, s.degenerate, s.solves)
+    tally = np.zeros(5, np.int64)
+    for group in stencil_classes(plan.two, order, rng)(np.unique(plan.bins.keys)):
+        s = relocate_class(plan, group, method, options)
+        tally += (s.accepted, s.rejected, s.degenerate, s.solved, s.calls)
+        if bar is not None:
+            bar.update(len(group))
     after = plan.total_cost()
-    return PassStats(before, after, *map(int, tally), len(groups), time.perf_counter() - t0)
+    return PassStats(before, after, *map(int, tally), time.perf_counter() - t0)
 
 
-def facet_masses(plan: SurfacePlan, triangles: np.ndarray) -> np.ndarray:
-    """``(T,)`` mass on each face ``(T, 3)`` of the plan's complex (canonical units),
+def facet_masses(plan: StarPlan, triangles: np.ndarray) -> np.ndarray:
+    """``(T,)`` mass on each face ``(T, 3)`` of the plan (canonical units),
     each vertex's own mass shared among its faces in proportion to their areas.
 
     On a fine mesh (a few points per face) much of the mass sits on vertex
@@ -292,14 +325,13 @@ def facet_masses(plan: SurfacePlan, triangles: np.ndarray) -> np.ndarray:
     hole still gets little (its corners carry little), while a face on the
     surface gets a share of its corners' mass (docs/decisions.md#feature_recovery).
     """
-    pos = plan.complex.positions
+    pos = plan.positions
     c = pos[triangles]
     area = 0.5 * np.linalg.norm(np.cross(c[:, 1] - c[:, 0], c[:, 2] - c[:, 0]), axis=1)
     star = np.zeros(len(pos))
     np.add.at(star, triangles.ravel(), np.repeat(area, 3))
-    vertex = np.array([plan.simplex_mass(v) for v in range(len(pos))], np.float64)
-    own = np.array([plan.simplex_mass(triangle_key(*row)) for row in triangles.tolist()], np.float64)
-    return own + np.sum(vertex[triangles] * area[:, None] / star[triangles], axis=1)
+    own = plan.facet_mass()[plan.facet_rows(triangles)]
+    return own + np.sum(plan.vertex_mass()[triangles] * area[:, None] / star[triangles], axis=1)
 
 
 # ---------------------------------------------------------------- entry point
@@ -307,7 +339,8 @@ def recover_features(points, vertices, triangles, masses=None, *, passes: int = 
                      order: str = "colouring", density_threshold: float = DENSITY_THRESHOLD,
                      solver: str = "auto", seed: int = 0, progress: bool = False) -> FeatureRecovery:
     """Pulls a smooth mesh's vertices onto the creases and boundaries of the
-    points, then drops the facets that receive little mass (Algorithm 4).
+    points, then drops the facets that receive little mass (Algorithm 4);
+    the arrays of the run (:func:`recover_mesh_features` gives a :class:`SurfaceResult`).
 
     Args:
       points: ``(N, 3)`` the points the mesh was reconstructed from.
@@ -318,9 +351,10 @@ def recover_features(points, vertices, triangles, masses=None, *, passes: int = 
         one solver call each) or ``"sequential"`` (one vertex at a time, the paper).
       density_threshold: relative mass density below which a facet is dropped
         (``0`` keeps every facet that carries mass).
-      solver: the local LP solver, ``"exact"``, ``"batched"`` or ``"auto"``.
+      solver: the local LP solver: ``"exact"`` (HiGHS), ``"batched"`` (JAX) or
+        ``"auto"`` (JAX, HiGHS for the members it does not certify).
       seed: seeds the bins, the relaxation and each pass's vertex order.
-      progress: print a line per pass on stderr.
+      progress: a progress bar (tqdm, on stderr) over the passes' vertices.
 
     Returns:
       :class:`FeatureRecovery`.
@@ -340,26 +374,28 @@ def recover_features(points, vertices, triangles, masses=None, *, passes: int = 
     seed = check_number("seed", seed, integer=True)
     given = validate_input(points, vertices, triangles, masses)
     frame, q, m = to_canonical(given.points, given.masses)
-    solve = LocalSolver(solver)
     with jax.enable_x64(True):
-        plan, relaxation = initial_plan(frame.points_in(given.vertices), given.triangles, q, m, solve, seed)
+        plan, relaxation = initial_plan(frame.points_in(given.vertices), given.triangles, q, m, solver, seed,
+                                        order)
+        n_moving = len(np.unique(plan.bins.keys))
         stats = []
-        for k in range(passes):
-            s = relocation_pass(plan, solve, order, np.random.default_rng([seed, k]), given.triangles)
-            s = s._replace(cost_before=_cost_out(frame, s.cost_before), cost_after=_cost_out(frame, s.cost_after))
-            stats.append(s)
-            if progress:
-                print(f"pass {k + 1}/{passes}: cost {s.cost_before:.6g} -> {s.cost_after:.6g}, "
-                      f"{s.accepted} moves kept, {s.rejected} undone, {s.calls} solver calls, "
-                      f"{s.seconds:.1f} s", file=sys.stderr)
-    moved = frame.points_out(plan.complex.positions)
+        with tqdm(total=passes * n_moving, desc="feature recovery", unit="vertex", disable=not progress,
+                  file=sys.stderr, leave=False) as bar:
+            for k in range(passes):
+                bar.set_postfix_str(f"pass {k + 1}/{passes}")
+                s = relocation_pass(plan, solver, order, np.random.default_rng([seed, k]), bar=bar)
+                s = s._replace(cost_before=_cost_out(frame, s.cost_before),
+                               cost_after=_cost_out(frame, s.cost_after))
+                stats.append(s)
+                bar.set_postfix_str(f"pass {k + 1}/{passes}, cost {s.cost_after:.4g}")
+    moved = frame.points_out(plan.positions)
     mass = frame.masses_out(facet_masses(plan, given.triangles))
     density = facet_density(moved, given.triangles, mass)
     keep = keep_facets(density.relative, threshold)
     cost = _cost_out(frame, plan.total_cost())
     first = stats[0].cost_before if stats else cost
     return FeatureRecovery(moved, given.triangles[keep], keep, mass, density.relative, density.sorted, first,
-                           cost, tuple(stats), relaxation, plan, frame)
+                           cost, tuple(stats), relaxation, plan.to_surface_plan(), frame)
 
 
 def _cost_out(frame: Frame, cost: float) -> float:
