@@ -189,7 +189,8 @@ def run_poisson(o3d, pymeshlab, points: np.ndarray, n_vertices: int, depth: int,
 
 
 def measure(out: Output, truth, samples: int) -> dict:
-    """Chamfer, Hausdorff, crease and boundary error in % of D, time, sizes."""
+    """Chamfer, Hausdorff, crease and boundary error in % of D (``None``
+    where the truth has no crease or no boundary), time, sizes."""
     from otjax import metrics3d
 
     dist = metrics3d.surface_distances(out.vertices, out.triangles, out.edges, out.isolated, truth=truth,
@@ -197,8 +198,10 @@ def measure(out: Output, truth, samples: int) -> dict:
     crease = metrics3d.crease_error(out.vertices, out.triangles, truth.creases)
     boundary = metrics3d.boundary_error(out.vertices, out.triangles, truth.boundaries)
     d = truth.diagonal / 100
-    return {"chamfer": dist.chamfer / d, "hausdorff": dist.hausdorff / d, "crease": crease.mean / d,
-            "boundary": boundary.mean / d, "seconds": out.seconds, "vertices": len(out.vertices),
+    # None where the truth has no such feature (the metric would read 0 whatever the output).
+    return {"chamfer": dist.chamfer / d, "hausdorff": dist.hausdorff / d,
+            "crease": crease.mean / d if len(truth.creases) else None,
+            "boundary": boundary.mean / d if len(truth.boundaries) else None, "seconds": out.seconds, "vertices": len(out.vertices),
             "triangles": len(out.triangles), "note": out.note}
 
 
@@ -225,8 +228,7 @@ def render(path: Path, kind: Kind, points: np.ndarray, outputs: dict, rows: dict
                 ax.add_collection3d(Line3DCollection(out.vertices[out.edges], colors="k", linewidths=1.0))
             r = rows[name]
             ax.set_title(f"{name}: {r['vertices']} vertices, {r['triangles']} triangles\n"
-                         f"Chamfer {r['chamfer']:.2f}%, Hausdorff {r['hausdorff']:.1f}%, "
-                         f"crease {r['crease']:.2f}% D", fontsize=9)
+                         f"Chamfer {r['chamfer']:.2f}%, Hausdorff {r['hausdorff']:.1f}% D", fontsize=9)
         ax.set(xlim=(lo[0], hi[0]), ylim=(lo[1], hi[1]), zlim=(lo[2], hi[2]))
         ax.set_box_aspect(np.maximum(hi - lo, 1e-3))
         ax.view_init(25, 35)
@@ -241,9 +243,12 @@ def markdown(rows: list[dict]) -> str:
     lines = [("| input | method | vertices | triangles | Chamfer % D | Hausdorff % D | crease % D | boundary % D "
               "| time s |"),
              "| --- | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: |"]
+    def cell(x):
+        return "-" if x is None else f"{x:.3f}"
+
     for r in rows:
         lines.append(f"| {r['kind']} | {r['method']} | {r['vertices']} | {r['triangles']} | {r['chamfer']:.3f} | "
-                     f"{r['hausdorff']:.2f} | {r['crease']:.3f} | {r['boundary']:.3f} | {r['seconds']:.1f} |")
+                     f"{r['hausdorff']:.2f} | {cell(r['crease'])} | {cell(r['boundary'])} | {r['seconds']:.1f} |")
     return "\n".join(lines)
 
 
