@@ -23,6 +23,10 @@ Surfaces (3D, Digne et al. 2014):
   transport plan, local relaxation, the initial complex, vertex relocation,
   facet filtering, :class:`~otjax.surfaces.SurfaceResult`, a 3D view, and
   :func:`~otjax.surfaces.recover_features` (sharp features of a smooth mesh).
+- :func:`recover_features` -- ``recover_features(points, mesh, masses=None,
+  ...)``: a smooth mesh pulled onto the creases and boundaries of its points,
+  filled holes reopened, as a :class:`~otjax.surfaces.SurfaceResult`
+  (:func:`otjax.surfaces.recover_mesh_features`).
 - :mod:`otjax.lp` -- padded batches of local transport LPs, the batched JAX
   solver and the exact HiGHS one, per-member status.
 - :mod:`otjax.datasets3d`, :mod:`otjax.metrics3d` -- surfaces with known
@@ -40,6 +44,7 @@ from otjax.compile_cache import enable_compilation_cache
 from otjax.curves.reconstruct import reconstruct_curve
 from otjax.curves.result import CurveResult
 from otjax.io import image_to_points, read_points
+from otjax.surfaces.features import recover_mesh_features as recover_features
 
 __all__ = [
     "Background",
@@ -58,6 +63,7 @@ __all__ = [
     "metrics3d",
     "read_points",
     "reconstruct_curve",
+    "recover_features",
     "stencil",
     "surfaces",
 ]

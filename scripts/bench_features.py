@@ -16,6 +16,7 @@ Example::
 from __future__ import annotations
 
 import argparse
+import os
 import time
 
 import jax
@@ -54,12 +55,15 @@ def run(sample, order: str, passes: int, solver: str, seed: int) -> dict:
                            solver=solver, seed=seed, progress=True)
     seconds = time.perf_counter() - t
     row = {"order": order, "solver": solver, "passes": passes, "seconds": seconds,
+           "setup_seconds": seconds - sum(p.seconds for p in got.passes),
            "pass_seconds": [p.seconds for p in got.passes], "solver_calls": [p.calls for p in got.passes],
            "accepted": [p.accepted for p in got.passes], "rejected": [p.rejected for p in got.passes],
            "relaxation_sweeps": got.relaxation.sweeps, "relaxation_solves": got.relaxation.solves,
+           "relaxation_bounded": got.relaxation.bounded, "pass_solves": [p.solves for p in got.passes],
            "cost_before": got.cost_before, "cost_after": got.cost_after,
            "flips": flips(mesh.vertices, got.vertices, mesh.triangles), "kept": float(got.keep.mean())}
     row.update({f"after_{k}": v for k, v in quality(got.vertices, mesh.triangles, sample.truth).items()})
+    row["load_average"] = list(os.getloadavg())  # the VM is shared: read times against it
     return row
 
 
@@ -79,12 +83,12 @@ def main(argv=None) -> None:
     print(f"{len(sample.points)} points, mesh {len(mesh.vertices)} vertices / {len(mesh.triangles)} faces; "
           f"before: crease {before['crease_mean']:.4%} of D, Chamfer {before['chamfer']:.4%} of D")
     rows = [run(sample, order, args.passes, args.solver, args.seed) for order in args.orders]
-    print(f"{'order':<11}{'seconds':>9}{'calls/pass':>12}{'crease %D':>11}{'Chamfer %D':>12}{'flips':>7}"
-          f"{'kept':>7}")
+    print(f"{'order':<11}{'seconds':>9}{'setup':>8}{'calls/pass':>12}{'crease %D':>11}{'Chamfer %D':>12}"
+          f"{'flips':>7}{'kept':>7}{'load':>7}")
     for r in rows:
-        print(f"{r['order']:<11}{r['seconds']:>9.1f}{int(np.mean(r['solver_calls'])):>12d}"
+        print(f"{r['order']:<11}{r['seconds']:>9.1f}{r['setup_seconds']:>8.1f}{int(np.mean(r['solver_calls'])):>12d}"
               f"{100 * r['after_crease_mean']:>11.3f}{100 * r['after_chamfer']:>12.4f}{r['flips']:>7d}"
-              f"{r['kept']:>7.3f}")
+              f"{r['kept']:>7.3f}{r['load_average'][0]:>7.1f}")
     if args.json:
         write_json(args.json, {"benchmark": "features", "machine": machine(), "points": len(sample.points),
                                "vertices": len(mesh.vertices), "faces": len(mesh.triangles), "noise": 0.005,

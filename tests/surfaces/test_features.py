@@ -186,3 +186,83 @@ def test_bad_input_is_named(change, message):
 def test_bad_options_are_named(option, message):
     with pytest.raises(ValueError, match=message):
         recover_features(*square(), **option)
+
+
+# ------------------------------------------------------ the plan as arrays
+@pytest.fixture(scope="module")
+def relaxed_box():
+    sample = rounded_box(600, noise=0.005, seed=7, resolution=4)
+    given_ = validate_input(sample.points, sample.mesh.vertices, sample.mesh.triangles)
+    with jax.enable_x64(True):
+        plan, _ = initial_plan(given_.vertices, given_.triangles, given_.points, given_.masses, "exact", 0)
+    return plan
+
+
+def test_cut_matches_the_reference_stencils(relaxed_box):
+    plan = relaxed_box
+    reference = plan.to_surface_plan()
+    centres = star_colouring(plan.bins.keys, plan.n_vertices, np.arange(plan.n_vertices))[0]
+    batch = plan.cut(plan.stars, centres)
+    for b, v in enumerate(centres.tolist()):
+        c = reference.complex
+        s = reference.stencil(c.vertex_closure(v).vertices, c.star(v).triangles)
+        p, k = len(s.points), len(s.lp.capacity)
+        assert (batch.n_points[b], batch.n_bins[b]) == (p, k)
+        np.testing.assert_array_equal(batch.point[b, :p], s.points)
+        np.testing.assert_allclose(batch.mass[b, :p], s.lp.mass, rtol=1e-12)
+        np.testing.assert_allclose(batch.cost[b, :p, :k], s.lp.cost, rtol=1e-12, atol=1e-15)
+        np.testing.assert_array_equal(batch.simplex[b, :k], s.lp.simplex)
+        np.testing.assert_array_equal(batch.is_vertex[b, :k], s.lp.is_vertex)
+        assert batch.current[b] == pytest.approx(s.cost, rel=1e-12)
+        assert batch.lower[b] <= batch.current[b] * (1 + 1e-12)
+    assert plan.total_cost() == pytest.approx(reference.total_cost(), rel=1e-12)
+    np.testing.assert_allclose(reference.point_mass(), plan.masses, rtol=1e-12)
+
+
+def test_targets_match_the_reference(relaxed_box):
+    from otjax.surfaces.relocation import relocation_targets
+    plan = relaxed_box
+    centres = star_colouring(plan.bins.keys, plan.n_vertices, np.arange(plan.n_vertices))[1]
+    with jax.enable_x64(True):
+        want = relocation_targets(plan.to_surface_plan(), centres.tolist())
+    np.testing.assert_allclose(plan.targets(centres), want, rtol=1e-10, atol=1e-12)
+
+
+def test_batched_and_exact_solves_agree(relaxed_box):
+    from otjax.surfaces.star_passes import solve_stars
+    plan = relaxed_box
+    rng = np.random.default_rng(0)
+    plan.positions = plan.positions + rng.normal(scale=0.01, size=plan.positions.shape)  # stars to improve
+    centres = star_colouring(plan.bins.keys, plan.n_vertices, rng.permutation(plan.n_vertices))[0]
+    batch = plan.cut(plan.stars, centres, 64, 32)
+    with jax.enable_x64(True):
+        exact, batched = solve_stars(batch, "exact"), solve_stars(batch, "batched")
+    assert exact.better.sum() > 0 and exact.solved > exact.closed_form
+    for got in (exact, batched):
+        assert np.all(got.cost <= batch.current)
+        sent = got.plan.sum(axis=2)
+        np.testing.assert_allclose(sent[got.better], batch.mass[got.better], rtol=1e-9)  # every point's mass
+    # the batched solver is certified within 1e-3 of the optimum (NewtonOptions.rtol)
+    both = exact.better & batched.better
+    assert both.sum() >= 0.9 * exact.better.sum()
+    np.testing.assert_array_less(batched.cost[both], exact.cost[both] * (1 + 2e-3))
+
+
+# ----------------------------------------------------------- top-level call
+def test_top_level_call_gives_a_surface_result(capsys):
+    import otjax
+    from otjax.surfaces import SurfaceResult
+    box = rounded_box(300, noise=0.005, seed=8, resolution=3)
+    result = otjax.recover_features(box.points, box.mesh, passes=1, solver="exact", progress=True)
+    assert isinstance(result, SurfaceResult)
+    run = result.stats
+    np.testing.assert_array_equal(result.triangles, box.mesh.triangles[run.keep])
+    np.testing.assert_array_equal(result.vertices, run.vertices)
+    assert result.total_cost == run.cost_after and result.params["passes"] == 1
+    assert "feature recovery" in capsys.readouterr().err  # the progress bar
+    pair = otjax.recover_features(box.points, (box.mesh.vertices, box.mesh.triangles), passes=1,
+                                  solver="exact")
+    np.testing.assert_array_equal(pair.vertices, result.vertices)
+    assert capsys.readouterr().err == ""
+    with pytest.raises(ValueError, match="mesh must have vertices and triangles"):
+        otjax.recover_features(box.points, box.mesh.vertices)
