@@ -9,8 +9,15 @@ local plan (solved again by HiGHS) over the closed star of the target, and
 returns a :class:`SurfaceChange`. Calls run one way: nothing below calls
 back up.
 
-Vertex moves (§4.3) plug in through :meth:`~SurfaceEngine.movable` and
-:meth:`~SurfaceEngine.propose_moves`; none are proposed yet.
+Vertex moves (§4.3) go through the same protocol as the curve engine's:
+:meth:`~SurfaceEngine.propose_moves` makes each vertex's relocation
+(:func:`otjax.surfaces.relocation.propose_moves`: a few alternations of the
+closed-form target, a move half way there and a re-solve of its closed star)
+without changing anything, and :meth:`~SurfaceEngine.apply` of a
+:class:`~otjax.surfaces.relocation.StarMove` moves the vertex, writes its
+star's plan and returns a :class:`SurfaceMove`. The loop
+(:func:`otjax.decimation.relocation.relocate`) applies the moves that lower
+the cost.
 """
 
 from __future__ import annotations
@@ -28,6 +35,9 @@ from otjax.surfaces.collapse_scoring import (CollapseCandidate, ScoredCollapse, 
                                              score_candidates)
 from otjax.surfaces.complex import CollapseChange
 from otjax.surfaces.plan import SurfacePlan
+from otjax.surfaces.relocation import DAMPING, ROUNDS, StarMove
+from otjax.surfaces.relocation import propose_moves as propose_star_moves
+from otjax.surfaces.solvers import LocalSolver
 
 #: Sources of higher degree are not drawn (sampling rejects slots past it);
 #: the exhaustive queue still scores them.
@@ -43,7 +53,9 @@ class SurfaceChange(NamedTuple):
     Attributes:
       source, target: the collapsed half-edge.
       dirty: live vertices whose outgoing half-edges' scores are stale.
-      ring: the source's one-ring before the collapse (``target`` included).
+      ring: ``target`` and its neighbours after the collapse, increasing:
+        the vertices the loop relocates after it (the paper relocates the
+        vertex that remains; its neighbours' stars changed with it).
       delta: the change of the plan's total cost.
       collapse: the complex's :class:`~otjax.surfaces.complex.CollapseChange`.
     """
@@ -54,6 +66,20 @@ class SurfaceChange(NamedTuple):
     ring: tuple[int, ...]
     delta: float
     collapse: CollapseChange
+
+
+class SurfaceMove(NamedTuple):
+    """What :meth:`SurfaceEngine.apply` did for a move.
+
+    Attributes:
+      vertex: the moved vertex.
+      dirty: live vertices whose outgoing half-edges' scores are stale.
+      delta: the change of the plan's total cost.
+    """
+
+    vertex: int
+    dirty: frozenset
+    delta: float
 
 
 class Taken(NamedTuple):
@@ -71,6 +97,8 @@ class SurfaceEngine:
         certified) or ``"exact"`` (HiGHS).
       options: the JAX solver's settings.
       degree_bound: see :data:`DEGREE_BOUND`.
+      relocation_rounds: alternations of a proposed move (:data:`~otjax.surfaces.relocation.ROUNDS`).
+      damping: the fraction of the way to its target a move goes (the paper's half).
 
     ``"auto"`` needs JAX's float64 mode (``jax.enable_x64``).
 
@@ -82,7 +110,7 @@ class SurfaceEngine:
     """
 
     def __init__(self, plan: SurfacePlan, *, method: str = "auto", options: NewtonOptions = NewtonOptions(),
-                 degree_bound: int = DEGREE_BOUND):
+                 degree_bound: int = DEGREE_BOUND, relocation_rounds: int = ROUNDS, damping: float = DAMPING):
         self.plan = plan
         self.method = method
         self.options = options
@@ -91,8 +119,11 @@ class SurfaceEngine:
         self._hot: OrderedDict = OrderedDict()  # (source, target) -> (version, CollapseCandidate)
         self._bins: dict = {}  # bins of facets that may appear, valid while no vertex moves
         self.counts = {"scored": 0, "updated": 0, "partial": 0, "refused": 0, "exact_resolves": 0,
-                       "kernel_calls": 0}
-        self.seconds = {"export": 0.0, "score": 0.0}
+                       "kernel_calls": 0, "moves_proposed": 0}
+        self.seconds = {"export": 0.0, "score": 0.0, "propose_moves": 0.0}
+        self._relocation_rounds = relocation_rounds
+        self._damping = damping
+        self._move_solver = LocalSolver("exact" if method == "exact" else "auto", options)
         self.sizes: list[tuple[int, int]] = []  # (points, bins) of every scored stencil, in order
 
     # ------------------------------------------------------------ the loop's view
@@ -181,22 +212,30 @@ class SurfaceEngine:
             out[key] = cand
         return [Taken(out[k]) for k in keys]
 
-    def apply(self, candidate: CollapseCandidate) -> SurfaceChange:
-        """Collapses ``candidate`` on the complex and writes its local plan,
-        solved again by HiGHS (the exact optimum of the stencil), over the
-        target's closed star; returns the :class:`SurfaceChange`.
+    def apply(self, change: CollapseCandidate | StarMove) -> SurfaceChange | SurfaceMove:
+        """Applies a taken collapse or a proposed move.
+
+        A collapse: collapses the complex and writes the candidate's local
+        plan, solved again by HiGHS (the exact optimum of the stencil), over
+        the target's closed star; returns the :class:`SurfaceChange`. A
+        move: moves the vertex and writes its star's solved plan; returns
+        the :class:`SurfaceMove`.
 
         Raises:
           RuntimeError: HiGHS does not solve the stencil (not expected: a
             stencil with a vertex bin is always feasible).
         """
+        if isinstance(change, StarMove):
+            return self._apply_move(change)
+        return self._apply_collapse(change)
+
+    def _apply_collapse(self, candidate: CollapseCandidate) -> SurfaceChange:
         plan, c = self.plan, self.plan.complex
         s, t, st = candidate.source, candidate.target, candidate.stencil
         sol = solve_member(st.lp)
         if sol.status != CONVERGED:
             raise RuntimeError(f"HiGHS could not solve the collapse ({s}, {t}): status {sol.status}")
         written = plan.sparsified(st, sol.plan)
-        ring = c.neighbors(s)
         change = c.collapse(s, t)
         for f in candidate.removed:
             plan.drop_facet(f)
@@ -205,33 +244,51 @@ class SurfaceEngine:
         plan.assign(st, written)
         dirty = self._bump(t, s)
         delta = float(np.sum(written * st.lp.cost)) - st.cost
+        ring = tuple(sorted({t, *c.neighbors(t)}))
         return SurfaceChange(s, t, frozenset(dirty), ring, delta, change)
 
-    def _bump(self, target: int, source: int) -> set[int]:
-        """Bumps the versions of every vertex whose half-edges' stencils the
-        collapse changed, returns the live ones.
+    def _apply_move(self, move: StarMove) -> SurfaceMove:
+        v, st = move.vertex, move.stencil
+        self.plan.complex.move(v, move.position)
+        self.plan.assign(st, move.plan)
+        self.forget_bins([v])
+        delta = float(np.sum(move.plan * st.lp.cost)) - st.cost
+        return SurfaceMove(v, frozenset(self._bump(v)), delta)
 
-        The entries changed on the target's closed star ``Z``; a half-edge's
-        stencil holds the vertices within one edge of its ends and their
-        facets, so it changed if an end is within one edge of ``Z``: every
-        half-edge leaving a vertex within two edges of ``Z`` is stale.
+    def _bump(self, centre: int, source: int | None = None) -> set[int]:
+        """Bumps the versions of every vertex whose half-edges' stencils a
+        change on the closed star of ``centre`` (a collapse's target, a
+        moved vertex) made stale, and ``source``'s; returns the live ones.
+
+        The entries (and a move's position) changed on the closed star
+        ``Z`` of ``centre``; a half-edge's stencil holds the vertices within
+        one edge of its ends and their facets, so it changed if an end is
+        within one edge of ``Z``: every half-edge leaving a vertex within
+        two edges of ``Z`` is stale.
         """
         c = self.plan.complex
-        near = {target, *c.neighbors(target)}
+        near = {centre, *c.neighbors(centre)}
         for _ in range(2):
             near |= {w for v in near for w in c.neighbors(v)}
-        for v in near | {source}:
+        for v in near | ({source} if source is not None else set()):
             self._versions[v] += 1
         return near
 
-    # ------------------------------------------------------------ moves (a seam)
+    # ------------------------------------------------------------ moves
     def movable(self, v: int) -> bool:
-        """No vertex moves yet (relocation plugs in here)."""
-        return False
+        """Every live vertex may move (a vertex whose star carries no mass has no target)."""
+        return bool(self.plan.complex.alive[v])
 
-    def propose_moves(self, vertices) -> list:
-        """``[(vertex, delta, scored)]`` of vertex moves: none yet."""
-        return []
+    def propose_moves(self, vertices) -> list[tuple[int, float, tuple[StarMove]]]:
+        """``[(vertex, delta, (move,))]``: the relocation of each vertex that
+        lowers the cost (:func:`otjax.surfaces.relocation.propose_moves`),
+        made on the current state, nothing changed; ``apply(move)`` applies one."""
+        t0 = time.perf_counter()
+        moves = propose_star_moves(self.plan, vertices, self._move_solver, self._relocation_rounds,
+                                   damping=self._damping)
+        self.seconds["propose_moves"] += time.perf_counter() - t0
+        self.counts["moves_proposed"] += sum(m is not None for m in moves)
+        return [(m.vertex, m.delta, (m,)) for m in moves if m is not None]
 
     def forget_bins(self, vertices) -> None:
         """Drops cached bins of facets touching ``vertices`` (for a move)."""

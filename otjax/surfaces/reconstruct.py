@@ -3,7 +3,9 @@
 Points -> canonical frame -> initial complex (Delaunay of a subset, relaxed
 transport, facets with mass; §4.1) -> (re-binned) -> greedy half-edge
 collapses by increase of transport cost (§4.2, the shared loop of
-:mod:`otjax.decimation`) -> arrays in the input's units.
+:mod:`otjax.decimation`), relocating the remaining vertex and its
+neighbours after each (§4.3) -> relocation passes over every vertex ->
+arrays in the input's units.
 """
 
 from __future__ import annotations
@@ -15,6 +17,7 @@ import jax
 import numpy as np
 
 from otjax.decimation.loop import QUEUES, DecimationStats, decimate
+from otjax.decimation.relocation import relocate
 from otjax.frame import to_canonical
 from otjax.surfaces.bins import facet_areas
 from otjax.surfaces.complex import SimplicialComplex
@@ -32,6 +35,8 @@ SOLVERS = ("batched", "exact")
 REBIN = False
 #: Relaxation sweeps after re-binning.
 REBIN_SWEEPS = 2
+#: Relocation passes over every vertex after the decimation, at most.
+FINAL_RELOCATIONS = 4
 
 
 class SurfaceReconstruction(NamedTuple):
@@ -50,8 +55,10 @@ class SurfaceReconstruction(NamedTuple):
       plan: the :class:`SurfacePlan` (canonical frame; research use).
       complex: its :class:`SimplicialComplex` (canonical frame).
       vertex_ids: ``(V,)`` int64 id of each vertex row in ``complex``.
-      stats: the :class:`DecimationStats`.
-      seconds: wall time of ``initial``, ``rebin``, ``decimation``.
+      stats: the :class:`DecimationStats` (``relocations``: moves
+        applied during the decimation and in the final passes).
+      seconds: wall time of ``initial``, ``rebin``, ``decimation``,
+        ``final_relocation``.
     """
 
     vertices: np.ndarray
@@ -80,6 +87,7 @@ class SurfaceReconstruction(NamedTuple):
 def reconstruct_surface(points, masses=None, n_vertices: int = 100, *, queue: str = "multiple-choice",
                         choices: int = 40, switch_factor: float = 1.0, seed: int = 0, solver: str = "batched",
                         fraction: float = FRACTION, rebin: bool = REBIN, max_sweeps: int = 10,
+                        relocation: int | None = None, final_relocations: int = FINAL_RELOCATIONS,
                         progress: bool = False) -> SurfaceReconstruction:
     """Reconstructs a surface (triangles, plus edges and isolated vertices) from 3D points.
 
@@ -97,6 +105,14 @@ def reconstruct_surface(points, masses=None, n_vertices: int = 100, *, queue: st
       fraction: share of the points in the initial Delaunay (§4.1).
       rebin: give every facet the default bins before decimating.
       max_sweeps: relaxation sweeps of the initial complex at most.
+      relocation: relocate the vertex a collapse keeps and its neighbours
+        (§4.3: alternations of the closed-form target, a move half way
+        there, a re-solve of its star; kept where the cost falls) after
+        each of the last ``relocation`` collapses; ``None`` (default):
+        after every collapse, as the paper does; 0: never during the
+        decimation. Without relocation the vertices stay input points.
+      final_relocations: relocation passes over every vertex after the
+        decimation (fewer if a pass moves none; 0: none).
       progress: show a progress bar.
 
     Returns:
@@ -113,6 +129,8 @@ def reconstruct_surface(points, masses=None, n_vertices: int = 100, *, queue: st
     t0 = time.perf_counter()
     points, masses = _checked(points, masses, n_vertices, queue, choices, switch_factor, solver, fraction)
     seed = check_number("seed", seed, integer=True)
+    relocation = check_number("relocation", relocation, minimum=0, integer=True, allow_none=True)
+    final_relocations = check_number("final_relocations", final_relocations, minimum=0, integer=True)
     if masses is not None and np.any(masses <= 0):
         raise ValueError(f"masses must be > 0: {int(np.sum(masses <= 0))} are not")
     frame, q, m = to_canonical(points, masses)
@@ -131,9 +149,17 @@ def reconstruct_surface(points, masses=None, n_vertices: int = 100, *, queue: st
         seconds["rebin"] = time.perf_counter() - t1
         engine = SurfaceEngine(plan, method=method)
         t2 = time.perf_counter()
+        every = plan.complex.n_vertices  # more than the collapses: relocate after each
         stats = decimate(engine, n_vertices, queue=queue, choices=choices, switch_factor=switch_factor, seed=seed,
-                         progress=progress)
+                         relocation=every if relocation is None else relocation, progress=progress)
         seconds["decimation"] = time.perf_counter() - t2
+        t3 = time.perf_counter()
+        for _ in range(final_relocations):
+            moved = relocate(engine, engine.live_sources())[1]
+            stats.relocations += moved
+            if moved == 0:
+                break
+        seconds["final_relocation"] = time.perf_counter() - t3
     return _result(plan, frame, stats, seconds)
 
 

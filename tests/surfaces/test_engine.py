@@ -106,4 +106,40 @@ def test_decimate_drives_the_engine_to_the_target(queue):
     assert engine.stats()["scored"] >= 4
     assert plan.total_cost() >= cost - 1e-12  # a collapse never lowers the optimum of a relaxed plan much
     check_state(engine, plan.total_cost())
-    assert engine.propose_moves([0]) == [] and not engine.movable(0)
+    dead = int(np.flatnonzero(~plan.complex.alive)[0])
+    assert not engine.movable(dead) and engine.propose_moves([dead]) == []
+
+
+def test_a_move_changes_the_cost_by_its_delta_and_no_score_outside_its_dirty_set():
+    plan = strip_plan(seed=1)
+    c = plan.complex
+    c.move(4, c.positions[4] + [0.1, -0.1, 0.3])  # lifted off the strip's points: it has somewhere to go
+    engine = SurfaceEngine(plan, method="exact")
+    before = dict(engine.score(np.flatnonzero(c.alive).tolist()))
+    cost = plan.total_cost()
+    (v, delta, scored), = engine.propose_moves([4])
+    lifted = c.positions[4].copy()
+    assert v == 4 and delta < 0 and np.array_equal(c.positions[4], lifted)  # proposing moves nothing
+    versions = list(engine.versions)
+    change = engine.apply(*scored)
+    assert change.vertex == 4 and c.positions[4, 2] < 0.3 and change.delta == pytest.approx(delta, rel=1e-9)
+    check_state(engine, cost + change.delta)
+    bumped = {u for u in range(len(versions)) if engine.versions[u] != versions[u]}
+    assert bumped == set(change.dirty) and {4, *c.neighbors(4)} <= bumped
+    after = dict(engine.score(np.flatnonzero(c.alive).tolist()))
+    untouched = [h for h in after if h[0] not in bumped]
+    assert len(untouched) > 20
+    for h in untouched:
+        assert after[h] == pytest.approx(before[h], rel=1e-9, abs=1e-12), h
+    assert any(after.get(h) != pytest.approx(d, rel=1e-6) for h, d in before.items() if h[0] in change.dirty)
+
+
+def test_decimate_relocates_after_each_collapse_and_keeps_the_plan():
+    plan = sphere_plan(seed=2, n_vertices=12, n_points=60, min_bins=1)
+    engine = SurfaceEngine(plan, method="exact")
+    start = plan.complex.positions.copy()
+    stats = decimate(engine, 8, queue="exhaustive", relocation=100)
+    assert plan.complex.n_vertices == 8 and stats.collapses == 4 and stats.relocations > 0
+    check_state(engine, plan.total_cost())
+    alive = plan.complex.alive
+    assert np.any(plan.complex.positions[alive] != start[alive])

@@ -12,8 +12,9 @@ from otjax.surfaces.complex import SimplicialComplex
 from otjax.surfaces.fixed_plan_cost import fixed_plan_cost
 from otjax.surfaces.plan import BinSettings, Entries, SurfacePlan
 from otjax.surfaces.relaxation import LocalSolution
-from otjax.surfaces.relocation import (MIN_ASPECT, pack_entries, refine, relocate, relocation_targets,
-                                       star_simplices, star_targets)
+from otjax.surfaces.relocation import (MIN_ASPECT, local_target, pack_entries, propose_moves, refine, relocate,
+                                       relocation_targets, star_simplices, star_stencil, star_targets,
+                                       stencil_plan)
 from tests.surfaces.complexes import delaunay_complex
 from tests.surfaces.test_transport_plan import grid_complex
 
@@ -281,3 +282,66 @@ def test_refine_finds_the_plane_in_a_few_steps():
     assert stats.moved == (4,) and stats.step == 1.0
     assert plan.total_cost() < 1e-20 * before
     np.testing.assert_allclose(plan.complex.positions[4], home, atol=1e-10)
+
+
+def test_the_local_target_of_the_current_plan_is_the_kernel_target(plan):
+    vertices = [int(v) for v in np.flatnonzero(plan.complex.alive) if plan.complex.vertex_triangles[v]]
+    kernel = relocation_targets(plan, vertices)
+    checked = 0
+    for v, want in zip(vertices, kernel):
+        st = star_stencil(plan, v)
+        local = stencil_plan(plan, st)
+        # the local plan is the plan's entries: same cost, same marginals
+        assert float(np.sum(local * st.lp.cost)) == pytest.approx(st.cost, rel=1e-12)
+        np.testing.assert_allclose(local.sum(axis=1), st.lp.mass, rtol=1e-12)
+        got = local_target(plan, st, local, v)
+        if got is None:
+            continue
+        np.testing.assert_allclose(got, want, rtol=1e-10, atol=1e-12)
+        checked += 1
+    assert checked >= 4
+
+
+def test_a_proposed_move_brings_a_lifted_vertex_back_and_changes_nothing_until_applied():
+    plan, home = exact_plane(0.3)
+    before = plan.total_cost()
+    pos = plan.complex.positions.copy()
+    (move,) = propose_moves(plan, [4], exact, rounds=12)
+    np.testing.assert_array_equal(plan.complex.positions, pos)
+    assert plan.total_cost() == before
+    assert move.vertex == 4 and move.rounds >= 6 and move.delta < -0.99 * before
+    assert abs(move.position[2]) < 1e-3 and np.linalg.norm(move.position[:2] - home[:2]) < 0.05
+    plan.complex.move(4, move.position)
+    plan.assign(move.stencil, move.plan)
+    assert plan.total_cost() == pytest.approx(before + move.delta, rel=1e-9, abs=1e-12 * before)
+
+
+def test_no_move_is_proposed_where_none_lowers_the_cost_or_one_would_flatten_a_facet():
+    plan, _ = exact_plane(0.0)  # every point on its bin: cost 0
+    assert propose_moves(plan, [4], exact) == [None]
+    assert propose_moves(flattening_plan(), [2], exact, rounds=1, damping=1.0) == [None]
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.integers(0, 2**31 - 1), st.integers(5, 9), st.floats(0.2, 1.0))
+def test_each_proposed_move_lowers_the_total_cost_by_its_delta(seed, n, keep):
+    rng = np.random.default_rng(seed)
+    c = delaunay_complex(seed, n, keep)
+    plan = random_plan(c, rng, 20, max_bins=3)
+    vertices = [int(v) for v in rng.choice(n, min(n, 3), replace=False)]
+    moves = propose_moves(plan, vertices, exact, rounds=2)
+    assert len(moves) == len(vertices)
+    for move in moves:
+        if move is None:
+            continue
+        trial = SurfacePlan.from_entries(c, plan.points, plan.masses, plan.settings, plan.bins,
+                                         plan.vertex_entries, plan.facet_entries)
+        old = c.positions[move.vertex].copy()
+        before = numpy_cost(trial)
+        c.move(move.vertex, move.position)
+        trial.assign(move.stencil, move.plan)
+        after = numpy_cost(trial)
+        c.move(move.vertex, old)
+        assert move.delta < 0 and 1 <= move.rounds <= 2
+        assert after - before == pytest.approx(move.delta, rel=1e-9, abs=1e-12 * before)
+        np.testing.assert_allclose(trial.point_mass(), plan.masses, rtol=1e-12)
