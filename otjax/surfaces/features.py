@@ -7,10 +7,12 @@ connectivity and pulls its vertices onto the points' features:
 1. the input is validated (:func:`validate_input`) and moved to the canonical
    frame (:mod:`otjax.frame`), where everything is computed;
 2. bins are sampled on the mesh's facets, every point goes to its nearest
-   vertex and the plan is relaxed to a local minimum (§3.3);
+   vertex and the plan is relaxed by sweeps over the paper's facet
+   stencils (§3.3, :data:`RELAX_SWEEPS`);
 3. ``passes`` times, every vertex moves half way to its relocation target
-   (§4.3) and the transport on its closed star is re-solved
-   (:func:`otjax.surfaces.relocation.relocate`, one round); the order of the
+   (§4.3) and the transport on its closed star is re-solved (as
+   :func:`otjax.surfaces.relocation.relocate` with one round,
+   :func:`otjax.surfaces.star_passes.relocate_class`); the order of the
    vertices is a fresh permutation each pass (the paper suggests it, to avoid
    a bias from a fixed order);
 4. the facets are filtered by mass density (§4.4,
@@ -21,7 +23,13 @@ closed stars share no vertex touch disjoint parts of the plan, so their
 moves and re-solves commute: ``order="colouring"`` splits each pass's
 permutation into colour classes of such vertices (a greedy distance-2
 colouring, :func:`star_colouring`) and relocates a class with one solver
-call. ``order="sequential"`` keeps the paper's one vertex at a time.
+call; the relaxation's facet stencils are split alike. ``order="sequential"``
+keeps the paper's one vertex (one stencil) at a time. The connectivity never
+changes, so the plan is held as flat arrays
+(:class:`~otjax.surfaces.star_plan.StarPlan`) and a class is cut out, priced,
+solved and written back by array operations
+(:mod:`otjax.surfaces.star_passes`); the result carries the same plan as a
+:class:`SurfacePlan`.
 
 Relocation keeps a move only if its star's cost does not rise, so the plan's
 total cost never rises over a pass.
@@ -46,7 +54,7 @@ from otjax.surfaces.filtering import check_threshold, facet_density, keep_facets
 from otjax.surfaces.plan import BinSettings, SurfacePlan
 from otjax.surfaces.relaxation import RelaxationStats
 from otjax.surfaces.result import SurfaceResult
-from otjax.surfaces.star_passes import relax_stencils, relocate_class
+from otjax.surfaces.star_passes import OPTIONS, relax_stencils, relocate_class
 from otjax.surfaces.star_plan import StarPlan, distance2_graph
 from otjax.validation import _as_float_array, check_number, check_points
 
@@ -289,7 +297,7 @@ def stencil_classes(conflicts: scipy.sparse.csr_matrix, order: str, rng: np.rand
 # --------------------------------------------------------------------- steps
 def initial_plan(frame_vertices: np.ndarray, triangles: np.ndarray, points: np.ndarray, masses: np.ndarray,
                  method: str, seed: int, order: str = "colouring",
-                 options: NewtonOptions = NewtonOptions()) -> tuple[StarPlan, RelaxationStats]:
+                 options: NewtonOptions = OPTIONS) -> tuple[StarPlan, RelaxationStats]:
     """The relaxed plan of canonical ``points (N, 3)`` with ``masses (N,)`` onto
     the mesh ``frame_vertices (V, 3)``, ``triangles (T, 3)`` (§5): bins on every
     face, each point on its nearest vertex of a face, then at most
@@ -305,7 +313,7 @@ def initial_plan(frame_vertices: np.ndarray, triangles: np.ndarray, points: np.n
 
 
 def relocation_pass(plan: StarPlan, method: str, order: str, rng: np.random.Generator,
-                    options: NewtonOptions = NewtonOptions(), bar=None) -> PassStats:
+                    options: NewtonOptions = OPTIONS, bar=None) -> PassStats:
     """One pass over the plan's face vertices in a random order (canonical costs):
     each class of ``order`` relocated and re-solved by :func:`relocate_class`.
     ``bar``: a tqdm bar advanced by the vertices done."""
@@ -341,9 +349,16 @@ def facet_masses(plan: StarPlan, triangles: np.ndarray) -> np.ndarray:
 
 
 # ---------------------------------------------------------------- entry point
+def default_solver() -> str:
+    """The local LP solver when none is asked for: ``"exact"`` (HiGHS) on a
+    CPU backend, where it solves the small star problems faster than the
+    batched solver, ``"auto"`` on an accelerator (docs/decisions.md#feature_recovery_batches)."""
+    return "exact" if jax.default_backend() == "cpu" else "auto"
+
+
 def recover_features(points, vertices, triangles, masses=None, *, passes: int = PASSES,
                      order: str = "colouring", density_threshold: float = DENSITY_THRESHOLD,
-                     solver: str = "auto", seed: int = 0, progress: bool = False) -> FeatureRecovery:
+                     solver: str | None = None, seed: int = 0, progress: bool = False) -> FeatureRecovery:
     """Pulls a smooth mesh's vertices onto the creases and boundaries of the
     points, then drops the facets that receive little mass (Algorithm 4);
     the arrays of the run (:func:`recover_mesh_features` gives a :class:`SurfaceResult`).
@@ -358,7 +373,8 @@ def recover_features(points, vertices, triangles, masses=None, *, passes: int = 
       density_threshold: relative mass density below which a facet is dropped
         (``0`` keeps every facet that carries mass).
       solver: the local LP solver: ``"exact"`` (HiGHS), ``"batched"`` (JAX) or
-        ``"auto"`` (JAX, HiGHS for the members it does not certify).
+        ``"auto"`` (JAX, HiGHS for the members it does not certify); ``None``:
+        :func:`default_solver`.
       seed: seeds the bins, the relaxation and each pass's vertex order.
       progress: a progress bar (tqdm, on stderr) over the passes' vertices.
 
@@ -374,8 +390,9 @@ def recover_features(points, vertices, triangles, masses=None, *, passes: int = 
         raise ValueError(f"order must be 'colouring' or 'sequential', got {order!r}")
     if isinstance(passes, bool) or not isinstance(passes, (int, np.integer)) or passes < 0:
         raise ValueError(f"passes must be an integer >= 0, got {passes!r}")
-    if solver not in ("exact", "batched", "auto"):
-        raise ValueError(f"solver must be 'exact', 'batched' or 'auto', got {solver!r}")
+    if solver not in (None, "exact", "batched", "auto"):
+        raise ValueError(f"solver must be 'exact', 'batched', 'auto' or None, got {solver!r}")
+    solver = default_solver() if solver is None else solver
     threshold = check_threshold(density_threshold)
     seed = check_number("seed", seed, integer=True)
     given = validate_input(points, vertices, triangles, masses)
@@ -405,8 +422,8 @@ def recover_features(points, vertices, triangles, masses=None, *, passes: int = 
 
 
 def recover_mesh_features(points, mesh, masses=None, *, passes: int = PASSES, order: str = "colouring",
-                          density_threshold: float = DENSITY_THRESHOLD, solver: str = "auto", seed: int = 0,
-                          progress: bool = False) -> SurfaceResult:
+                          density_threshold: float = DENSITY_THRESHOLD, solver: str | None = None,
+                          seed: int = 0, progress: bool = False) -> SurfaceResult:
     """Feature recovery of a smooth mesh (Algorithm 4) as a :class:`SurfaceResult`;
     exported as ``otjax.recover_features``.
 
@@ -443,8 +460,8 @@ def recover_mesh_features(points, mesh, masses=None, *, passes: int = PASSES, or
     else:
         raise ValueError("mesh must have vertices and triangles attributes (e.g. otjax.io3d.read_mesh) "
                          f"or be a (vertices, triangles) pair, got {type(mesh).__name__}")
-    params = {"passes": passes, "order": order, "density_threshold": density_threshold, "solver": solver,
-              "seed": seed}
+    params = {"passes": passes, "order": order, "density_threshold": density_threshold,
+              "solver": default_solver() if solver is None else solver, "seed": seed}
     t0 = time.perf_counter()
     run = recover_features(points, vertices, triangles, masses, passes=passes, order=order,
                            density_threshold=density_threshold, solver=solver, seed=seed, progress=progress)

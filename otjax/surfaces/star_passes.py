@@ -43,6 +43,11 @@ AUTO_MIN_BATCH = 8
 MIN_POINTS = 64
 MIN_BINS = 32
 MIN_SIMPLICES = 16
+#: The batched solver's settings here: half its default step budget. A chunk
+#: of members runs until its slowest is done, and a few star problems in a
+#: hundred need three times the median steps; with ``"auto"`` HiGHS solves
+#: those instead (docs/decisions.md#feature_recovery_batches).
+OPTIONS = NewtonOptions(steps=24)
 
 
 class StarSolution(NamedTuple):
@@ -97,7 +102,7 @@ def _transport_lp(batch: StarBatch, rows: np.ndarray, shape: tuple[int, int, int
                        point_mask=point_mask, bin_mask=bin_mask, simplex_mask=simplex_mask)
 
 
-def solve_stars(batch: StarBatch, method: str, options: NewtonOptions = NewtonOptions()) -> StarSolution:
+def solve_stars(batch: StarBatch, method: str, options: NewtonOptions = OPTIONS) -> StarSolution:
     """The best plan of each star of ``batch`` that lowers its cost (see the module docstring).
 
     Args:
@@ -155,7 +160,7 @@ def solve_stars(batch: StarBatch, method: str, options: NewtonOptions = NewtonOp
 
 # --------------------------------------------------------------- relaxation
 def relax_stencils(plan: StarPlan, stencils: Stencils, classes_of, method: str,
-                   options: NewtonOptions = NewtonOptions(), *, tolerance: float = TOLERANCE,
+                   options: NewtonOptions = OPTIONS, *, tolerance: float = TOLERANCE,
                    max_sweeps: int = MAX_SWEEPS) -> RelaxationStats:
     """Relaxes ``plan`` in place by sweeps of local re-solves (Algorithm 2).
 
@@ -223,7 +228,7 @@ class MoveStats(NamedTuple):
 
 
 def relocate_class(plan: StarPlan, group: np.ndarray, method: str,
-                   options: NewtonOptions = NewtonOptions(), damping: float = DAMPING) -> MoveStats:
+                   options: NewtonOptions = OPTIONS, damping: float = DAMPING) -> MoveStats:
     """Moves the vertices ``group`` ``(k,)`` (disjoint closed stars) ``damping``
     of the way to their targets and re-solves their stars, in place (§4.3).
 
