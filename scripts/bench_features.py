@@ -26,12 +26,11 @@ import jax
 jax.config.update("jax_enable_x64", True)  # script-local: the relocation kernels need float64
 
 import numpy as np
+from bench_surface_lp import machine, write_json
 
-from bench_surface_lp import machine, write_json  # noqa: E402  (scripts/ is on the path)
-
-from otjax.datasets3d import rounded_box  # noqa: E402
-from otjax.metrics3d import chamfer, crease_error  # noqa: E402
-from otjax.surfaces.features import default_solver, recover_features  # noqa: E402
+from otjax.datasets3d import rounded_box
+from otjax.metrics3d import chamfer, crease_error
+from otjax.surfaces.features import default_solver, recover_features
 
 
 def quality(vertices, triangles, truth) -> dict:
@@ -39,7 +38,7 @@ def quality(vertices, triangles, truth) -> dict:
     d = truth.diagonal
     c = crease_error(vertices, triangles, truth.creases)
     # None (JSON null) where the mesh has no edge sharp enough to measure (the error is infinite)
-    share = (lambda x: float(x / d) if np.isfinite(x) else None)  # noqa: E731
+    share = (lambda x: float(x / d) if np.isfinite(x) else None)
     return {"crease_mean": share(c.mean), "crease_max": share(c.max), "sharp_edges": c.n_edges,
             "chamfer": chamfer(vertices, triangles, truth=truth, samples=20000) / d}
 

@@ -45,7 +45,6 @@ import jax
 import numpy as np
 import scipy.sparse
 import scipy.spatial
-
 from tqdm.auto import tqdm
 
 from otjax.frame import Frame, to_canonical

@@ -28,7 +28,7 @@ import scipy.spatial
 
 from otjax.surfaces.bins import facet_bins
 from otjax.surfaces.complex import SimplicialComplex
-from otjax.surfaces.plan import ENTRY_FLOOR, BinSettings, Bins, Entries, SurfacePlan
+from otjax.surfaces.plan import ENTRY_FLOOR, Bins, BinSettings, Entries, SurfacePlan
 
 
 class MeshBins(NamedTuple):
@@ -259,7 +259,7 @@ class StarPlan:
     def facet_rows(self, triangles: np.ndarray) -> np.ndarray:
         """``(T',)`` row of ``bins.keys`` of each face ``(T', 3)`` (any orientation)."""
         keys = self.bins.keys
-        code = lambda k: (k[:, 0] * self.n_vertices + k[:, 1]) * self.n_vertices + k[:, 2]  # noqa: E731
+        code = lambda k: (k[:, 0] * self.n_vertices + k[:, 1]) * self.n_vertices + k[:, 2]
         return np.searchsorted(code(keys), code(np.sort(np.asarray(triangles, np.int64), axis=1)))
 
     # -------------------------------------------------------- star problems

@@ -9,8 +9,13 @@ from hypothesis import strategies as st
 
 from otjax.datasets3d import holed_square, rounded_box
 from otjax.metrics3d import chamfer, crease_error, triangle_samples
-from otjax.surfaces.features import (initial_plan, recover_features, relocation_pass, star_colouring,
-                                     validate_input)
+from otjax.surfaces.features import (
+    initial_plan,
+    recover_features,
+    relocation_pass,
+    star_colouring,
+    validate_input,
+)
 
 
 def normals(vertices, triangles):
