@@ -29,3 +29,53 @@ jax.config.update("jax_enable_x64", True)
 @pytest.fixture
 def rng():
     return np.random.default_rng(20111)
+
+
+# The suite's slowest files, slowest first (measured with --durations on a
+# 2-core CPU, cold compile cache). The workers (``-n 2 --dist loadfile``) take
+# whole files in collection order, so these start first and the many quick
+# files fill in behind them; started last, one of them would run on one
+# worker while the other sits idle.
+SLOW_FILES = (
+    "tests/curves/test_reconstruct.py",
+    "tests/curves/test_reconstruct_clean_star.py",
+    "tests/test_bench.py",
+    "tests/notebooks/test_gradient_relocation.py",
+    "tests/curves/test_reconstruct_junctions.py",
+    "tests/curves/test_reconstruct_star.py",
+    "tests/test_cli.py",
+    "tests/notebooks/test_reconstruction_gallery.py",
+    "tests/curves/test_rescoring.py",
+    "tests/notebooks/test_batched_collapse_scoring.py",
+    "tests/notebooks/test_surface_reconstruction.py",
+    "tests/curves/test_reconstruct_skyline.py",
+    "tests/curves/test_refinement.py",
+    "tests/lp/test_batched.py",
+    "tests/curves/test_filtering.py",
+    "tests/surfaces/test_features.py",
+    "tests/notebooks/test_feature_recovery.py",
+    "tests/surfaces/test_initial_complex.py",
+    "tests/surfaces/test_collapse_scoring.py",
+    "tests/curves/test_scoring.py",
+    "tests/curves/test_reconstruct_outliers.py",
+    "tests/test_cli_surfaces.py",
+    "tests/curves/test_triangulation.py",
+    "tests/surfaces/test_engine.py",
+    "tests/fuzz/test_api3d.py",
+    "tests/surfaces/test_reconstruct.py",
+    "tests/curves/test_decimate.py",
+)
+
+
+def pytest_configure(config):
+    # xdist otherwise sorts the files by their number of tests, which puts the
+    # slowest ones (a notebook is one test) last; keep the order below.
+    if hasattr(config.option, "loadscopereorder"):
+        config.option.loadscopereorder = False
+
+
+def pytest_collection_modifyitems(config, items):
+    rank = {path: i for i, path in enumerate(SLOW_FILES)}
+    root = config.rootpath
+    # sorted() is stable: the other files keep their order, after these.
+    items[:] = sorted(items, key=lambda item: rank.get(item.path.relative_to(root).as_posix(), len(rank)))

@@ -1,0 +1,42 @@
+"""Acceptance of ``reconstruct_curve`` on a noisy skyline (1500 points, σ =
+0.5% D, corners and open ends), with and without relocation, in every queue
+configuration.
+
+Each pair of reconstructions runs once per module, and several tests read it.
+"""
+
+import functools
+
+import pytest
+
+from tests.curves.reconstruct_cases import (
+    MODES,
+    SKYLINE_POINTS,
+    check_parallel_against_sequential,
+    check_skyline,
+    mode_args,
+    skyline_case,
+)
+
+
+@pytest.fixture(scope="module")
+def skyline_pair():
+    return skyline_case()
+
+
+@functools.cache
+def in_mode(name: str):
+    return skyline_case(**mode_args(name, SKYLINE_POINTS))
+
+
+def test_relocation_improves_skyline_corners(skyline_pair):
+    check_skyline(*skyline_pair)
+
+
+@pytest.mark.parametrize("mode", list(MODES))
+def test_modes_pass_the_skyline_acceptance(mode):
+    check_skyline(*in_mode(mode))
+
+
+def test_parallel_mode_costs_at_most_3_percent_more_in_5x_fewer_rounds(skyline_pair):
+    check_parallel_against_sequential("skyline", in_mode("parallel")[0], skyline_pair[0])
