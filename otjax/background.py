@@ -31,6 +31,7 @@ NEIGHBOURS = 16
 LEVEL_FACTOR = 2.0
 CONSISTENCY = 0.5
 DIMENSION_MARGIN = 0.5
+SHAPE_SIGMAS = 2.0
 
 
 class Background(NamedTuple):
@@ -102,3 +103,23 @@ def estimate_background(points: np.ndarray, neighbours: int = NEIGHBOURS) -> Bac
         return none._replace(local_density=rho / scale**dim)
     probability = np.minimum(1.0, beta / rho)
     return Background(beta / scale**dim, float(beta * unit_volume / n), probability, rho / scale**dim)
+
+
+def shape_weights(background: Background, neighbours: int = NEIGHBOURS, sigmas: float = SHAPE_SIGMAS) -> np.ndarray:
+    """The share of each point's mass that a reconstruction should transport.
+
+    ``1 - min(1, c beta / rho_i)`` with ``c = 1 + sigmas / sqrt(k)``: the
+    shape's share of the local density, counting only what stands
+    ``sigmas`` standard errors of the k-nearest-neighbour estimate above
+    the background level. With ``c = 1`` a background point whose estimate
+    came out high by chance (a quarter of them are 25% high at ``k = 16``)
+    would keep a fifth of its mass, enough in sum to pull vertices off the
+    shape (docs/decisions.md#background).
+
+    Returns:
+      ``(n,)`` weights in ``[0, 1]``; all ones when no background was found.
+    """
+    if not background.found:
+        return np.ones(len(background.probability))
+    factor = 1.0 + sigmas / math.sqrt(neighbours)
+    return 1.0 - np.minimum(1.0, factor * background.probability)

@@ -23,7 +23,7 @@ from otjax import datasets
 from otjax.cli_surfaces import add_surface_parsers
 from otjax.compile_cache import default_cache_dir, enable_compilation_cache
 from otjax.curves.decimate import QUEUES
-from otjax.curves.reconstruct import reconstruct_curve
+from otjax.curves.reconstruct import EXHAUSTIVE_COLLAPSES, reconstruct_curve
 from otjax.curves.result import SAVE_EXTENSIONS
 from otjax.io import IMAGE_EXTENSIONS, TEXT_EXTENSIONS, check_output_paths, read_points, write_files
 from otjax.validation import check_points, check_target
@@ -77,12 +77,12 @@ def _curve_parser(sub) -> argparse.ArgumentParser:
     p.add_argument("--keep-chords", action="store_true", default=None,
                    help="keep the redundant chords of 3-cycles that noise leaves")
     p.add_argument("--relocation", type=int, metavar="K",
-                   help="relocate during the last K collapses only (default: after every collapse)")
+                   help="relocate during the last K collapses only (default: 100)")
     p.add_argument("--final-relocations", type=int, metavar="P", help="relocation passes at the end")
     p.add_argument("--refine", action="store_true", default=None, help="refine vertices by gradient descent")
     p.add_argument("--queue", choices=QUEUES,
                    help="collapse order: exhaustive, multiple-choice, parallel (default: exhaustive up to "
-                   "2000 collapses, multiple-choice above)")
+                   f"{EXHAUSTIVE_COLLAPSES} collapses, multiple-choice above)")
     p.add_argument("--choices", type=int, metavar="K", help="multiple-choice: half-edges drawn per step (15)")
     p.add_argument("--initial-vertices", type=int, metavar="V",
                    help="random subset of the points used as initial vertices (default: automatic)")

@@ -66,3 +66,26 @@ def test_fills_a_box_in_3d_too():
     est = estimate_background(np.vstack([plane, noise]))
     assert est.found and est.fraction == pytest.approx(1000 / 5000, rel=0.25)
     assert not estimate_background(plane).found
+
+
+def test_shape_weights_give_background_points_almost_nothing_and_the_shape_most():
+    """A dense line over uniform noise: the noise keeps a few percent of its
+    mass in all (where ``1 - beta / rho`` would leave it a sizeable share:
+    k-NN estimates of a uniform field scatter about 25% around it), the
+    line's points most of theirs."""
+    from otjax.background import shape_weights
+
+    rng = np.random.default_rng(5)
+    noise = rng.random((3000, 2))
+    t = rng.random(3000)
+    line = np.stack([t, 0.5 + 0.002 * rng.standard_normal(3000)], 1)
+    est = estimate_background(np.concatenate([line, noise]))
+    assert est.found
+    w = shape_weights(est)
+    far = np.abs(noise[:, 1] - 0.5) > 0.05
+    naive = 1.0 - est.probability[3000:][far]
+    assert w[3000:][far].mean() < 0.05 < naive.mean()
+    assert np.median(w[:3000]) > 0.8
+    assert ((w >= 0) & (w <= 1)).all()
+    no_background = estimate_background(line)
+    assert not no_background.found and (shape_weights(no_background) == 1).all()

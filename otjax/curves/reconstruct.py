@@ -15,7 +15,7 @@ from typing import NamedTuple
 import jax
 import numpy as np
 
-from otjax.background import Background, estimate_background
+from otjax.background import Background, estimate_background, shape_weights
 from otjax.curves.decimate import QUEUES, DecimationStats, decimate, within_tolerance
 from otjax.curves.engine import CurveEngine
 from otjax.curves.plan import TransportPlan
@@ -61,7 +61,7 @@ def reconstruct_curve(points, masses=None, n_vertices: int | None = None, *, tol
         the shape (docs/benchmarks.md#outliers-relevance-against-density).
       background: ``"auto"``: estimate uniform background noise from the points
         (:func:`otjax.background.estimate_background`); where there is some, each point's mass is scaled by
-        its probability of being shape before the reconstruction, and edges and isolated vertices that do
+        its share of shape (:func:`otjax.background.shape_weights`) before the reconstruction, and edges and isolated vertices that do
         not stand out of the background are dropped at the end
         (:func:`otjax.curves.filtering.above_background`). Without background (clean or merely noisy input)
         nothing changes. ``"none"``: no estimate.
@@ -125,7 +125,7 @@ class _InFrame(NamedTuple):
       points: ``(n, 2)`` the points in it.
       masses: ``(n,)`` their masses in it.
       noise: the estimated background, or ``None``.
-      transported: ``masses`` scaled by each point's probability of being shape.
+      transported: ``masses`` scaled by :func:`otjax.background.shape_weights`.
     """
 
     frame: Frame
@@ -144,11 +144,11 @@ def _in_frame(points: np.ndarray, masses: np.ndarray, background: str) -> _InFra
 
 
 def _discount_background(points, masses, mode: str):
-    """``(background or None, masses scaled by each point's probability of being shape)``."""
+    """``(background or None, masses scaled by their shape weights)``."""
     if mode != "auto":
         return None, masses
     noise = estimate_background(points)
-    return noise, masses * (1.0 - noise.probability) if noise.found else masses
+    return noise, masses * shape_weights(noise) if noise.found else masses
 
 
 def _check_params(n_points: int, *, n_vertices, tolerance, relevance, density, background, chords, relocation,
