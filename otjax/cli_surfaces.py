@@ -37,8 +37,9 @@ def _outputs(p: argparse.ArgumentParser) -> None:
     p.add_argument("--points", type=int, metavar="M", help=f"examples only: sampled points ({EXAMPLE_POINTS})")
     p.add_argument("--noise", type=float, default=0.0, metavar="F",
                    help="examples only: Gaussian noise, a fraction of the bounding-box diagonal")
-    p.add_argument("--solver", choices=("batched", "exact"), default="batched",
-                   help="local LP solver: batched JAX (HiGHS for what it does not certify) or HiGHS alone")
+    p.add_argument("--solver", choices=("batched", "exact"),
+                   help="local LP solver: batched JAX (HiGHS for what it does not certify) or HiGHS alone "
+                   "(default: batched for surface; for recover, HiGHS on a CPU and batched on an accelerator)")
     p.add_argument("--quiet", action="store_true", help="print nothing but errors")
 
 
@@ -94,8 +95,9 @@ def _run_surface(args, usage) -> int:
     else:
         points, masses = read_points3d(args.input)
     n_vertices = EXAMPLE_VERTICES if args.n_vertices is None else args.n_vertices
-    params = {"n_vertices": n_vertices, "queue": args.queue, "seed": args.seed, "solver": args.solver}
-    run = reconstruct_surface(points, masses, n_vertices, queue=args.queue, seed=args.seed, solver=args.solver,
+    solver = args.solver or "batched"
+    params = {"n_vertices": n_vertices, "queue": args.queue, "seed": args.seed, "solver": solver}
+    run = reconstruct_surface(points, masses, n_vertices, queue=args.queue, seed=args.seed, solver=solver,
                               progress=not args.quiet)
     result = run.to_result(params)
     return _finish(result, args, outputs)
@@ -113,7 +115,7 @@ def _run_recover(args, usage) -> int:
     else:
         (points, masses), mesh = read_points3d(args.inputs[0]), read_mesh(args.inputs[1])
     options = {"passes": args.passes, "order": "sequential" if args.sequential else "colouring", "seed": args.seed,
-               "solver": "auto" if args.solver == "batched" else "exact"}
+               "solver": {None: None, "batched": "auto", "exact": "exact"}[args.solver]}
     if args.density_threshold is not None:
         options["density_threshold"] = args.density_threshold
     got = recover_features(points, mesh.vertices, mesh.triangles, masses, progress=not args.quiet, **options)
