@@ -1,4 +1,4 @@
-"""Render the acceptance cases of ``tests/test_reconstruct.py`` as PNG pictures.
+"""Render the curve acceptance cases (``tests/curves/test_reconstruct_*.py``) as PNG pictures.
 
     python scripts/gallery.py [--out docs/gallery] [--seed 0] [--small] [--cases NAME ...]
 
