@@ -11,7 +11,7 @@ import otjax
 
 NOTEBOOKS = sorted((Path(__file__).resolve().parent.parent / "notebooks").glob("*.ipynb"))
 EXPECTED = {"batched_collapse_scoring.ipynb", "feature_recovery.ipynb", "gradient_relocation.ipynb",
-            "reconstruction_gallery.ipynb"}
+            "reconstruction_gallery.ipynb", "surface_reconstruction.ipynb"}
 
 
 def test_the_notebooks_are_there():
