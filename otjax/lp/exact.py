@@ -175,6 +175,9 @@ def _solver() -> highspy.Highs:
         h.setOptionValue("output_flag", False)
         h.setOptionValue("primal_feasibility_tolerance", TOLERANCE)
         h.setOptionValue("dual_feasibility_tolerance", TOLERANCE)
+        # Local transport LPs are small and have nothing to reduce: presolve costs more than it saves
+        # (docs/decisions.md#lp_solver).
+        h.setOptionValue("presolve", "off")
         _LOCAL.highs = h
     return h
 
