@@ -25,8 +25,7 @@ Surfaces (3D, Digne et al. 2014):
   :func:`~otjax.surfaces.recover_features` (sharp features of a smooth mesh).
 - :func:`recover_features` -- ``recover_features(points, mesh, masses=None,
   ...)``: a smooth mesh pulled onto the creases and boundaries of its points,
-  filled holes reopened, as a :class:`~otjax.surfaces.SurfaceResult`
-  (:func:`otjax.surfaces.recover_mesh_features`).
+  filled holes reopened, as a :class:`~otjax.surfaces.SurfaceResult`.
 - :mod:`otjax.lp` -- padded batches of local transport LPs, the batched JAX
   solver and the exact HiGHS one, per-member status.
 - :mod:`otjax.datasets3d`, :mod:`otjax.metrics3d` -- surfaces with known
@@ -44,7 +43,7 @@ from otjax.compile_cache import enable_compilation_cache
 from otjax.curves.reconstruct import reconstruct_curve
 from otjax.curves.result import CurveResult
 from otjax.io import image_to_points, read_points
-from otjax.surfaces.features import recover_mesh_features as recover_features
+from otjax.surfaces.features import recover_features
 
 __all__ = [
     "Background",

@@ -118,8 +118,8 @@ def _run_recover(args, usage) -> int:
                "solver": {None: None, "batched": "auto", "exact": "exact"}[args.solver]}
     if args.density_threshold is not None:
         options["density_threshold"] = args.density_threshold
-    got = recover_features(points, mesh.vertices, mesh.triangles, masses, progress=not args.quiet, **options)
-    return _finish(got.to_result(options), args, outputs, filtered=True)
+    result = recover_features(points, mesh, masses, progress=not args.quiet, **options)
+    return _finish(result, args, outputs, filtered=True)
 
 
 def _finish(result, args, outputs, filtered: bool = False) -> int:

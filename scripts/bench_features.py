@@ -54,8 +54,8 @@ def flips(before, after, triangles) -> int:
 def run(sample, order: str, passes: int, solver: str, seed: int) -> dict:
     mesh = sample.mesh
     t = time.perf_counter()
-    got = recover_features(sample.points, mesh.vertices, mesh.triangles, passes=passes, order=order,
-                           solver=solver, seed=seed, progress=True)
+    got = recover_features(sample.points, mesh, passes=passes, order=order, solver=solver, seed=seed,
+                           progress=True).stats
     seconds = time.perf_counter() - t
     row = {"order": order, "solver": solver or default_solver(), "passes": passes, "seconds": seconds,
            "setup_seconds": seconds - sum(p.seconds for p in got.passes),

@@ -24,9 +24,9 @@ simplicial complex, for research code and notebooks.
 - :class:`SurfaceResult` -- a reconstructed surface: arrays, densities,
   ``.save()`` (``.ply``, ``.obj``, ``.off``, ``.json``), ``.plot()``.
 - :func:`recover_features` -- pull a smooth mesh's vertices onto the creases
-  and boundaries of its points and reopen filled holes (§5): the arrays of
-  the run (:class:`FeatureRecovery`); :func:`recover_mesh_features` (top
-  level: ``otjax.recover_features``) gives the :class:`SurfaceResult`.
+  and boundaries of its points and reopen filled holes (§5), as a
+  :class:`SurfaceResult` whose ``stats`` is the run's :class:`FeatureRecovery`
+  (also ``otjax.recover_features``).
 - :func:`plot_complex` -- a matplotlib 3D view of points, the complex
   coloured by density and the transport plan.
 
@@ -36,7 +36,7 @@ The LP layer itself (padded batches, solvers, statuses) is :mod:`otjax.lp`.
 from otjax.surfaces.bins import FacetBins, bin_positions, facet_bins
 from otjax.surfaces.complex import CollapseChange, ComplexArrays, LocalComplex, SimplicialComplex
 from otjax.surfaces.engine import SurfaceEngine
-from otjax.surfaces.features import FeatureRecovery, PassStats, recover_features, recover_mesh_features
+from otjax.surfaces.features import FeatureRecovery, PassStats, recover_features
 from otjax.surfaces.filtering import FacetDensity, FilteredComplex, facet_density, filter_facets
 from otjax.surfaces.initial_complex import InitialComplex, initial_complex, initial_settings
 from otjax.surfaces.plan import BinSettings, Stencil, SurfacePlan
@@ -53,5 +53,5 @@ __all__ = [
     "RelocationStats", "SimplicialComplex", "Stencil", "SurfaceEngine", "SurfacePlan", "SurfaceReconstruction",
     "SurfaceResult", "bin_positions",
     "exact_solver", "facet_bins", "facet_density", "facet_ring", "filter_facets", "initial_complex",
-    "initial_settings", "plan_segments", "plot_complex", "reconstruct_surface", "recover_features", "recover_mesh_features", "refine", "relax", "relocate", "relocation_targets",
+    "initial_settings", "plan_segments", "plot_complex", "reconstruct_surface", "recover_features", "refine", "relax", "relocate", "relocation_targets",
 ]

@@ -81,7 +81,8 @@ class PassStats(NamedTuple):
     Attributes:
       cost_before, cost_after: the plan's total cost (user units) around the pass.
       accepted: moves kept; rejected: moves undone (the star's cost rose);
-      degenerate: moves not made (a facet would degenerate).
+      degenerate: moves not made (a facet would degenerate); shortened:
+      moves tried shorter so that no face turns over.
       solves: local LPs solved; calls: solver calls (colour classes, or vertices).
       seconds: wall time.
     """
@@ -91,13 +92,15 @@ class PassStats(NamedTuple):
     accepted: int
     rejected: int
     degenerate: int
+    shortened: int
     solves: int
     calls: int
     seconds: float
 
 
 class FeatureRecovery(NamedTuple):
-    """What :func:`recover_features` returns (user units throughout, except ``plan``).
+    """The arrays of a :func:`recover_features` run, its result's ``stats``
+    (user units throughout, except ``plan``).
 
     Attributes:
       vertices: ``(V, 3)`` float64 the moved vertices (every input row).
@@ -318,10 +321,10 @@ def relocation_pass(plan: StarPlan, method: str, order: str, rng: np.random.Gene
     ``bar``: a tqdm bar advanced by the vertices done."""
     t0 = time.perf_counter()
     before = plan.total_cost()
-    tally = np.zeros(5, np.int64)
+    tally = np.zeros(6, np.int64)
     for group in stencil_classes(plan.two, order, rng)(np.unique(plan.bins.keys)):
         s = relocate_class(plan, group, method, options)
-        tally += (s.accepted, s.rejected, s.degenerate, s.solved, s.calls)
+        tally += (s.accepted, s.rejected, s.degenerate, s.shortened, s.solved, s.calls)
         if bar is not None:
             bar.update(len(group))
     after = plan.total_cost()
@@ -355,16 +358,18 @@ def default_solver() -> str:
     return "exact" if jax.default_backend() == "cpu" else "auto"
 
 
-def recover_features(points, vertices, triangles, masses=None, *, passes: int = PASSES,
-                     order: str = "colouring", density_threshold: float = DENSITY_THRESHOLD,
-                     solver: str | None = None, seed: int = 0, progress: bool = False) -> FeatureRecovery:
+def recover_features(points, mesh, masses=None, *, passes: int = PASSES, order: str = "colouring",
+                     density_threshold: float = DENSITY_THRESHOLD, solver: str | None = None, seed: int = 0,
+                     progress: bool = False) -> SurfaceResult:
     """Pulls a smooth mesh's vertices onto the creases and boundaries of the
-    points, then drops the facets that receive little mass (Algorithm 4);
-    the arrays of the run (:func:`recover_mesh_features` gives a :class:`SurfaceResult`).
+    points, then drops the facets that receive little mass (Algorithm 4).
 
     Args:
       points: ``(N, 3)`` the points the mesh was reconstructed from.
-      vertices, triangles: ``(V, 3)`` and ``(T, 3)`` the smooth mesh.
+      mesh: the smooth mesh: anything with ``vertices (V, 3)`` and
+        ``triangles (T, 3)`` attributes (:func:`otjax.io3d.read_mesh`, a
+        :class:`SurfaceResult`, a dataset's ``mesh``) or a
+        ``(vertices, triangles)`` pair.
       masses: ``(N,)`` point masses, default all 1.
       passes: relocation passes over the vertices (>= 0).
       order: ``"colouring"`` (classes of vertices with disjoint closed stars,
@@ -378,13 +383,26 @@ def recover_features(points, vertices, triangles, masses=None, *, passes: int = 
       progress: a progress bar (tqdm, on stderr) over the passes' vertices.
 
     Returns:
-      :class:`FeatureRecovery`.
+      A :class:`SurfaceResult`: every input vertex moved (``vertices (V, 3)``),
+      the faces the density filter keeps, as given, with their masses, the
+      transport cost, the options as ``params``, the points for its plots;
+      its ``stats`` is the run's :class:`FeatureRecovery` (which faces are
+      kept, densities, passes, the plan).
 
     Raises:
-      ValueError: malformed points, masses or mesh (shapes, non-finite values,
-        no faces, indices out of range, degenerate or repeated faces), points
-        at another scale than the mesh or far from it, or a bad option.
+      ValueError: a ``mesh`` of neither form, malformed points, masses or
+        mesh (shapes, non-finite values, no faces, indices out of range,
+        degenerate or repeated faces), points at another scale than the
+        mesh or far from it, or a bad option; all before any work.
+
+    Example:
+      >>> from otjax.datasets3d import rounded_box
+      >>> box = rounded_box(300, noise=0.005, seed=1, resolution=3)
+      >>> result = recover_features(box.points, box.mesh, passes=1, solver="exact")
+      >>> result.vertices.shape, result.stats.cost_after <= result.stats.cost_before
+      ((56, 3), True)
     """
+    vertices, triangles = _mesh_arrays(mesh)
     if order not in ("colouring", "sequential"):
         raise ValueError(f"order must be 'colouring' or 'sequential', got {order!r}")
     if isinstance(passes, bool) or not isinstance(passes, (int, np.integer)) or passes < 0:
@@ -395,6 +413,28 @@ def recover_features(points, vertices, triangles, masses=None, *, passes: int = 
     threshold = check_threshold(density_threshold)
     seed = check_number("seed", seed, integer=True)
     given = validate_input(points, vertices, triangles, masses)
+    params = {"passes": int(passes), "order": order, "density_threshold": threshold, "solver": solver,
+              "seed": seed}
+    t0 = time.perf_counter()
+    run = _recover(given, passes, order, threshold, solver, seed, progress)
+    # the validated input (duplicates merged), back from the canonical frame
+    return run.to_result(params, time.perf_counter() - t0, run.frame.points_out(run.plan.points),
+                         run.frame.masses_out(run.plan.masses))
+
+
+def _mesh_arrays(mesh) -> tuple:
+    """``(vertices, triangles)`` of a mesh object or pair (unchecked)."""
+    if hasattr(mesh, "vertices") and hasattr(mesh, "triangles"):
+        return mesh.vertices, mesh.triangles
+    if isinstance(mesh, (tuple, list)) and len(mesh) == 2:
+        return tuple(mesh)
+    raise ValueError("mesh must have vertices and triangles attributes (e.g. otjax.io3d.read_mesh) "
+                     f"or be a (vertices, triangles) pair, got {type(mesh).__name__}")
+
+
+def _recover(given: CheckedInput, passes: int, order: str, threshold: float, solver: str, seed: int,
+             progress: bool) -> FeatureRecovery:
+    """Algorithm 4 on checked input: the plan, the passes, the filter (the run's arrays)."""
     frame, q, m = to_canonical(given.points, given.masses)
     with jax.enable_x64(True):
         plan, relaxation = initial_plan(frame.points_in(given.vertices), given.triangles, q, m, solver, seed,
@@ -418,55 +458,6 @@ def recover_features(points, vertices, triangles, masses=None, *, passes: int = 
     first = stats[0].cost_before if stats else cost
     return FeatureRecovery(moved, given.triangles[keep], keep, mass, density.relative, density.sorted, first,
                            cost, tuple(stats), relaxation, plan.to_surface_plan(), frame)
-
-
-def recover_mesh_features(points, mesh, masses=None, *, passes: int = PASSES, order: str = "colouring",
-                          density_threshold: float = DENSITY_THRESHOLD, solver: str | None = None,
-                          seed: int = 0, progress: bool = False) -> SurfaceResult:
-    """Feature recovery of a smooth mesh (Algorithm 4) as a :class:`SurfaceResult`;
-    exported as ``otjax.recover_features``.
-
-    Args:
-      points: ``(N, 3)`` the points the mesh was reconstructed from.
-      mesh: the smooth mesh: anything with ``vertices (V, 3)`` and
-        ``triangles (T, 3)`` attributes (:func:`otjax.io3d.read_mesh`, a
-        :class:`SurfaceResult`, a dataset's ``mesh``) or a
-        ``(vertices, triangles)`` pair.
-      masses: ``(N,)`` point masses, default all 1.
-      passes, order, density_threshold, solver, seed, progress: as
-        :func:`recover_features`.
-
-    Returns:
-      A :class:`SurfaceResult`: every input vertex moved (``vertices (V, 3)``),
-      the faces the density filter keeps with their masses, the transport
-      cost, the options as ``params``, the points for its plots; its
-      ``stats`` is the run's :class:`FeatureRecovery`.
-
-    Raises:
-      ValueError: a ``mesh`` of neither form, and as :func:`recover_features`.
-
-    Example:
-      >>> from otjax.datasets3d import rounded_box
-      >>> box = rounded_box(300, noise=0.005, seed=1, resolution=3)
-      >>> result = recover_mesh_features(box.points, box.mesh, passes=1, solver="exact")
-      >>> result.vertices.shape, result.stats.cost_after <= result.stats.cost_before
-      ((56, 3), True)
-    """
-    if hasattr(mesh, "vertices") and hasattr(mesh, "triangles"):
-        vertices, triangles = mesh.vertices, mesh.triangles
-    elif isinstance(mesh, (tuple, list)) and len(mesh) == 2:
-        vertices, triangles = mesh
-    else:
-        raise ValueError("mesh must have vertices and triangles attributes (e.g. otjax.io3d.read_mesh) "
-                         f"or be a (vertices, triangles) pair, got {type(mesh).__name__}")
-    params = {"passes": passes, "order": order, "density_threshold": density_threshold,
-              "solver": default_solver() if solver is None else solver, "seed": seed}
-    t0 = time.perf_counter()
-    run = recover_features(points, vertices, triangles, masses, passes=passes, order=order,
-                           density_threshold=density_threshold, solver=solver, seed=seed, progress=progress)
-    # the validated input (duplicates merged), back from the canonical frame
-    return run.to_result(params, time.perf_counter() - t0, run.frame.points_out(run.plan.points),
-                         run.frame.masses_out(run.plan.masses))
 
 
 def _cost_out(frame: Frame, cost: float) -> float:

@@ -214,14 +214,57 @@ def relax_stencils(plan: StarPlan, stencils: Stencils, classes_of, method: str,
 
 
 # --------------------------------------------------------------- relocation
+#: A move is shortened so that each face around the vertex keeps at least
+#: this share of its normal's projection on the input face's normal: no face
+#: turns over, and none is brought to the edge of turning in one move.
+FLIP_MARGIN = 0.5
+
+
+def face_normals(corners: np.ndarray) -> np.ndarray:
+    """``(F, 3)`` unnormalised normals ``(c1 - c0) x (c2 - c0)`` of triangles ``(F, 3, 3)``."""
+    return np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+
+
+def flip_free_steps(corners: np.ndarray, slot: np.ndarray, direction: np.ndarray, reference: np.ndarray,
+                    limit: float, margin: float = FLIP_MARGIN) -> np.ndarray:
+    """The longest step along ``direction`` each face allows its moving corner.
+
+    Args:
+      corners: ``(F, 3, 3)`` triangles, corners in the order ``reference`` was made in.
+      slot: ``(F,)`` int which corner moves (0, 1 or 2).
+      direction: ``(F, 3)`` the moving corner goes to ``corner + t * direction``.
+      reference: ``(F, 3)`` the normals the faces must not turn away from
+        (the input mesh's, in the same corner order).
+      limit: the longest step asked for.
+      margin: the share of the way to turning over a step may go.
+
+    Returns:
+      ``(F,)`` the largest ``t`` in ``[0, limit]`` with
+      ``n(t) . r >= (1 - margin) n(0) . r`` (``n(t) . r`` is linear in ``t``:
+      the normal is linear in each corner); 0 where ``n(0) . r <= 0`` and the
+      move would lower it further.
+    """
+    f = np.arange(len(slot))
+    u = corners[f, (slot + 1) % 3]
+    w = corners[f, (slot + 2) % 3]
+    # with the moving corner x: n = u x w + x x (u - w), so n . r = n(0) . r + t d . ((u - w) x r)
+    now = np.einsum("fd,fd->f", face_normals(corners), reference)
+    slope = np.einsum("fd,fd->f", direction, np.cross(u - w, reference))
+    falling = slope < 0
+    turn = np.where(falling, np.maximum(now, 0.0) / np.where(falling, -slope, 1.0), np.inf)
+    return np.minimum(limit, margin * turn)
+
+
 class MoveStats(NamedTuple):
     """What :func:`relocate_class` did: moves ``accepted``, ``rejected`` (the
     star's cost rose; undone), ``degenerate`` (not made: a facet would
-    flatten), LPs ``solved`` and ``exact`` (HiGHS), ``calls`` to the solver (0 or 1)."""
+    flatten), ``shortened`` (made shorter so that no face turns over), LPs
+    ``solved`` and ``exact`` (HiGHS), ``calls`` to the solver (0 or 1)."""
 
     accepted: int
     rejected: int
     degenerate: int
+    shortened: int
     solved: int
     exact: int
     calls: int
@@ -233,28 +276,38 @@ def relocate_class(plan: StarPlan, group: np.ndarray, method: str,
     of the way to their targets and re-solves their stars, in place (§4.3).
 
     As :func:`otjax.surfaces.relocation.relocate` with one round: the targets
-    with the plan fixed (:meth:`StarPlan.targets`); a move that would flatten
-    a facet of its star below :data:`~otjax.surfaces.relocation.MIN_ASPECT`
+    with the plan fixed (:meth:`StarPlan.targets`); a move is shortened so
+    that no face around the vertex turns away from its input normal
+    (:func:`flip_free_steps`: a full move can fold a face over its
+    neighbour where the noise is comparable to the edges); a move that would
+    flatten a facet of its star below :data:`~otjax.surfaces.relocation.MIN_ASPECT`
     (and flatter than it was) is not made; each moved star is re-solved, and
     a move is kept only if the star's best cost after it is no higher than
     its cost before; otherwise the vertex goes back and its entries stay.
-    So the plan's total cost never rises.
+    So the plan's total cost never rises, and no face turns over.
     """
     group = np.asarray(group, np.int64)
     old = plan.positions[group].copy()
-    new = old + damping * (plan.targets(group) - old)
-    moving = np.any(new != old, axis=1)
+    direction = plan.targets(group) - old
     facets, row, _ = plan.star_facets.take(group)
-    corners = plan.positions[plan.bins.keys[facets]]
+    keys = plan.bins.keys[facets]
+    corners = plan.positions[keys]
+    at = keys == group[row][:, None]
+    allowed = flip_free_steps(corners, np.argmax(at, axis=1), direction[row], plan.reference_normals[facets],
+                              damping)
+    step = np.full(len(group), float(damping))
+    np.minimum.at(step, row, allowed)
+    new = old + step[:, None] * direction
+    moving = np.any(new != old, axis=1)
+    shortened = moving & (step < damping)
     before_aspect = aspect(corners)
-    at = plan.bins.keys[facets] == group[row][:, None]
     corners[at] = new[row[np.nonzero(at)[0]]]
     after_aspect = aspect(corners)
     flat = (after_aspect < MIN_ASPECT) & (after_aspect < before_aspect)
     degenerate = moving & (np.bincount(row[flat], minlength=len(group)) > 0)
     trial = moving & ~degenerate
     if not trial.any():
-        return MoveStats(0, 0, int(degenerate.sum()), 0, 0, 0)
+        return MoveStats(0, 0, int(degenerate.sum()), 0, 0, 0, 0)
     who = group[trial]
     before = plan.costs(plan.stars.take(who))
     plan.positions[who] = new[trial]
@@ -263,4 +316,5 @@ def relocate_class(plan: StarPlan, group: np.ndarray, method: str,
     keep = got.cost <= before
     plan.replace(batch, np.flatnonzero(keep & got.better), got.plan[keep & got.better])
     plan.positions[who[~keep]] = old[trial][~keep]
-    return MoveStats(int(keep.sum()), int((~keep).sum()), int(degenerate.sum()), got.solved, got.exact, 1)
+    return MoveStats(int(keep.sum()), int((~keep).sum()), int(degenerate.sum()), int(np.sum(shortened & trial)),
+                     got.solved, got.exact, 1)

@@ -181,7 +181,10 @@ class StarPlan:
       stars: :class:`Stencils` the closed star of each vertex (row ``v``);
       rings: :class:`Stencils` the paper's stencil of each facet (row ``f``):
         it, the facets sharing an edge with it, and their vertices (§3.3);
-      two: :func:`distance2_graph` of the mesh.
+      two: :func:`distance2_graph` of the mesh;
+      reference_normals: ``(T, 3)`` ``(c1 - c0) x (c2 - c0)`` of each facet
+        (corners in key order) at the given ``positions``: the orientation
+        moves must keep (:func:`otjax.surfaces.star_passes.relocate_class`).
     """
 
     def __init__(self, positions: np.ndarray, triangles: np.ndarray, points: np.ndarray, masses: np.ndarray,
@@ -208,6 +211,8 @@ class StarPlan:
                                           np.c_[corner, keys[:, [2, 0, 1]].ravel()]]), axis=0)
         self.closed_star = Ragged(np.searchsorted(pairs[:, 0], np.arange(nv + 1)), pairs[:, 1])
         self.stars = Stencils(self.closed_star, self.star_facets)
+        c = self.positions[keys]
+        self.reference_normals = np.cross(c[:, 1] - c[:, 0], c[:, 2] - c[:, 0])
         self.rings = _facet_rings(keys, nv)
         used = np.unique(keys)
         _, near = scipy.spatial.cKDTree(self.positions[used]).query(self.points)

@@ -124,7 +124,7 @@ def test_recover_features_validates_or_names_the_problem(monkeypatch, points, me
     vertices, triangles = mesh
     try:
         with warnings_are_errors():
-            recover_features(points, vertices, triangles, make_masses(masses, points), passes=passes,
+            recover_features(points, (vertices, triangles), make_masses(masses, points), passes=passes,
                              order=order, density_threshold=threshold, seed=seed)
     except ValueError as err:
         assert str(err).strip()

@@ -26,7 +26,7 @@ def normals(vertices, triangles):
 @pytest.fixture(scope="module")
 def cube():
     sample = rounded_box(1500, noise=0.005, seed=3, resolution=6)
-    got = recover_features(sample.points, sample.mesh.vertices, sample.mesh.triangles, passes=2, solver="exact")
+    got = recover_features(sample.points, sample.mesh, passes=2, solver="exact").stats
     return sample, got
 
 
@@ -34,7 +34,7 @@ def cube():
 def hole():
     sample = holed_square(1500, noise=0.005, seed=4, resolution=10)
     # four passes: the hole's border vertices need them to reach the border on this coarse grid
-    got = recover_features(sample.points, sample.mesh.vertices, sample.mesh.triangles, passes=4, solver="exact")
+    got = recover_features(sample.points, sample.mesh, passes=4, solver="exact").stats
     return sample, got
 
 
@@ -147,12 +147,12 @@ def test_cost_never_rises_over_a_pass(order):
 
 def test_seeded_runs_are_identical_and_seeds_differ():
     sample = rounded_box(300, noise=0.005, seed=6, resolution=3)
-    args = (sample.points, sample.mesh.vertices, sample.mesh.triangles)
+    args = (sample.points, sample.mesh)
     a = recover_features(*args, passes=1, solver="exact", seed=1)
     b = recover_features(*args, passes=1, solver="exact", seed=1)
     c = recover_features(*args, passes=1, solver="exact", seed=2)
     np.testing.assert_array_equal(a.vertices, b.vertices)
-    np.testing.assert_array_equal(a.keep, b.keep)
+    np.testing.assert_array_equal(a.triangles, b.triangles)
     assert not np.array_equal(a.vertices, c.vertices)
 
 
@@ -181,16 +181,18 @@ def square():
 ])
 def test_bad_input_is_named(change, message):
     with pytest.raises(ValueError, match=message):
-        recover_features(*change(*square()), passes=0, solver="exact")
+        p, v, t = change(*square())
+        recover_features(p, (v, t), passes=0, solver="exact")
 
 
 @pytest.mark.parametrize("option, message", [
-    (dict(order="random"), "order must be"), (dict(passes=-1), "passes must be"),
-    (dict(solver="simplex"), "solver must be"), (dict(density_threshold=-1.0), "threshold"),
+    ({"order": "random"}, "order must be"), ({"passes": -1}, "passes must be"),
+    ({"solver": "simplex"}, "solver must be"), ({"density_threshold": -1.0}, "threshold"),
 ])
 def test_bad_options_are_named(option, message):
     with pytest.raises(ValueError, match=message):
-        recover_features(*square(), **option)
+        p, v, t = square()
+        recover_features(p, (v, t), **option)
 
 
 # ------------------------------------------------------ the plan as arrays
@@ -271,3 +273,6 @@ def test_top_level_call_gives_a_surface_result(capsys):
     assert capsys.readouterr().err == ""
     with pytest.raises(ValueError, match="mesh must have vertices and triangles"):
         otjax.recover_features(box.points, box.mesh.vertices)
+    # one public entry, the same object at both levels
+    assert otjax.recover_features is otjax.surfaces.recover_features
+    assert not any(hasattr(m, "recover_mesh_features") for m in (otjax, otjax.surfaces))
