@@ -10,7 +10,10 @@ the paper's sequential order). Its problems are cut out together
   cost cannot improve and is not solved;
 - a star whose every point has a cheapest bin free of uniformity
   constraints is solved in closed form;
-- the others go to :func:`otjax.lp.solve.solve` in padded batches of a few
+- with ``"exact"`` the others go to HiGHS one at a time, on their real
+  points and bins (:func:`otjax.lp.exact.solve_member`: no padded batch to
+  build and unpack);
+- otherwise to :func:`otjax.lp.solve.solve` in padded batches of a few
   fixed shapes (:data:`BATCH`, :data:`MIN_POINTS` ...), so that JAX compiles
   few shapes however the class sizes vary; with ``"auto"`` HiGHS re-solves
   only the members the batched solver did not certify, and solves the
@@ -25,7 +28,8 @@ from typing import NamedTuple
 import numpy as np
 
 from otjax.lp.batched import NewtonOptions
-from otjax.lp.problem import CONVERGED, ITERATION_LIMIT, TransportLP
+from otjax.lp.exact import solve_member
+from otjax.lp.problem import CONVERGED, ITERATION_LIMIT, LocalLP, TransportLP
 from otjax.lp.solve import solve
 from otjax.surfaces.relaxation import GAIN, MAX_SWEEPS, TOLERANCE, RelaxationStats
 from otjax.surfaces.relocation import DAMPING, MIN_ASPECT, aspect
@@ -102,6 +106,49 @@ def _transport_lp(batch: StarBatch, rows: np.ndarray, shape: tuple[int, int, int
                        point_mask=point_mask, bin_mask=bin_mask, simplex_mask=simplex_mask)
 
 
+def _solve_member(batch: StarBatch, m: int) -> tuple[int, np.ndarray]:
+    """``(status, (P, K) plan)`` of star ``m`` of ``batch`` by HiGHS, on its
+    real points and bins only (the plan is 0 elsewhere and when not converged)."""
+    p, k = int(batch.n_points[m]), int(batch.n_bins[m])
+    lp = LocalLP(batch.cost[m, :p, :k], batch.mass[m, :p], batch.capacity[m, :k], batch.simplex[m, :k],
+                 batch.is_vertex[m, :k])
+    sol = solve_member(lp)
+    plan = np.zeros(batch.cost.shape[1:])
+    if sol.status == CONVERGED:
+        plan[:p, :k] = sol.plan
+    return sol.status, plan
+
+
+def _solve_padded(batch: StarBatch, rest: np.ndarray, method: str, options: NewtonOptions, plans: np.ndarray,
+                  todo: np.ndarray) -> tuple[int, int]:
+    """Solves stars ``rest`` of ``batch`` in padded batches of a few shapes,
+    writing their plans into ``plans`` and clearing ``todo`` where no plan
+    is usable; ``(unconverged, exact)`` as in :class:`StarSolution`."""
+    _, p_cap, k_cap = plans.shape
+    unconverged = exact = 0
+    shapes = np.c_[[width(int(n), MIN_POINTS) for n in batch.n_points[rest]],
+                   [width(int(n), MIN_BINS) for n in batch.n_bins[rest]],
+                   [width(int(n), MIN_SIMPLICES) for n in batch.n_simplices[rest]]].astype(np.int64)
+    for shape in {tuple(s) for s in shapes.tolist()}:
+        members = rest[np.all(shapes == shape, axis=1)]
+        how = "exact" if method == "auto" and len(members) < AUTO_MIN_BATCH else method
+        size = _batch_size(len(members), how)
+        for lo in range(0, len(members), size):
+            part = members[lo:lo + size]
+            got = solve(_transport_lp(batch, part, shape, size), how, options)
+            sol = got.solution
+            exact += len(part) if how == "exact" else got.exact_resolves
+            status = np.asarray(sol.status)[:len(part)]
+            usable = (status == CONVERGED) | (status == ITERATION_LIMIT)
+            unconverged += int(np.sum(usable & (status != CONVERGED)))
+            pp, kk = min(shape[0], p_cap), min(shape[1], k_cap)
+            got_plan = np.zeros((len(part), p_cap, k_cap))
+            got_plan[:, :pp, :kk] = np.asarray(sol.plan)[:len(part), :pp, :kk]
+            plans[part[usable]] = got_plan[usable]
+            todo[part[~usable]] = False
+    return unconverged, exact
+
+
 def solve_stars(batch: StarBatch, method: str, options: NewtonOptions = OPTIONS) -> StarSolution:
     """The best plan of each star of ``batch`` that lowers its cost (see the module docstring).
 
@@ -128,27 +175,15 @@ def solve_stars(batch: StarBatch, method: str, options: NewtonOptions = OPTIONS)
         np.put_along_axis(one_hot, fb[..., None], batch.mass[rows][..., None], axis=2)
         plans[rows] = one_hot
     rest = np.flatnonzero(todo & ~closed)
-    unconverged = exact = 0
-    shapes = np.c_[[width(int(n), MIN_POINTS) for n in batch.n_points[rest]],
-                   [width(int(n), MIN_BINS) for n in batch.n_bins[rest]],
-                   [width(int(n), MIN_SIMPLICES) for n in batch.n_simplices[rest]]].astype(np.int64)
-    for shape in {tuple(s) for s in shapes.tolist()}:
-        members = rest[np.all(shapes == shape, axis=1)]
-        how = "exact" if method == "auto" and len(members) < AUTO_MIN_BATCH else method
-        size = _batch_size(len(members), how)
-        for lo in range(0, len(members), size):
-            part = members[lo:lo + size]
-            got = solve(_transport_lp(batch, part, shape, size), how, options)
-            sol = got.solution
-            exact += len(part) if how == "exact" else got.exact_resolves
-            status = np.asarray(sol.status)[:len(part)]
-            usable = (status == CONVERGED) | (status == ITERATION_LIMIT)
-            unconverged += int(np.sum(usable & (status != CONVERGED)))
-            pp, kk = min(shape[0], p_cap), min(shape[1], k_cap)
-            got_plan = np.zeros((len(part), p_cap, k_cap))
-            got_plan[:, :pp, :kk] = np.asarray(sol.plan)[:len(part), :pp, :kk]
-            plans[part[usable]] = got_plan[usable]
-            todo[part[~usable]] = False
+    unconverged = 0
+    if method == "exact":
+        # one member at a time, as cut: no padded batch to build and unpack
+        for m in rest.tolist():
+            status, plans[m] = _solve_member(batch, m)
+            todo[m] &= status == CONVERGED
+        exact = len(rest)
+    else:
+        unconverged, exact = _solve_padded(batch, rest, method, options, plans, todo)
     plans = sparsify(batch.mass, plans)
     candidate = np.einsum("bpk,bpk->b", plans, batch.cost)
     better = todo & (candidate < goal)
