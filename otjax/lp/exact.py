@@ -35,6 +35,7 @@ _MODEL_STATUS = {
     highspy.HighsModelStatus.kIterationLimit: ITERATION_LIMIT,
     highspy.HighsModelStatus.kTimeLimit: ITERATION_LIMIT,
 }
+_COLWISE, _MINIMIZE = int(highspy.MatrixFormat.kColwise), int(highspy.ObjSense.kMinimize)
 _LOCAL = threading.local()  # one HiGHS object per thread: it holds the model
 
 
@@ -210,22 +211,14 @@ def _highs(lp: LocalLP, cost: np.ndarray, free: np.ndarray, time_limit: float | 
     index[start[p * k]:] = row_of[con]
     value[start[p * k]:] = -np.asarray(lp.capacity, np.float64)[con]
 
-    model = highspy.HighsLp()
-    model.num_col_ = p * k + s
-    model.num_row_ = p + len(con)
-    model.col_cost_ = np.concatenate([cost.ravel(), np.zeros(s)])
-    model.col_lower_ = np.zeros(p * k + s)
-    model.col_upper_ = np.full(p * k + s, highspy.kHighsInf)
-    bound = np.concatenate([np.asarray(lp.mass, np.float64), np.zeros(len(con))])
-    model.row_lower_ = bound
-    model.row_upper_ = bound
-    model.a_matrix_.format_ = highspy.MatrixFormat.kColwise
-    model.a_matrix_.start_ = start.astype(np.int32)
-    model.a_matrix_.index_ = index
-    model.a_matrix_.value_ = value
     h = _solver()
     h.setOptionValue("time_limit", highspy.kHighsInf if time_limit is None else float(time_limit))
-    h.passModel(model)
+    # The arrays go to HiGHS as they are: filling a HighsLp's fields converts each one element by
+    # element, which took as long as solving these small LPs. Integrality 0: every column continuous.
+    n_col, bound = p * k + s, np.concatenate([np.asarray(lp.mass, np.float64), np.zeros(len(con))])
+    h.passModel(n_col, p + len(con), nnz, _COLWISE, _MINIMIZE, 0.0,
+                np.concatenate([cost.ravel(), np.zeros(s)]), np.zeros(n_col), np.full(n_col, highspy.kHighsInf),
+                bound, bound, start[:-1].astype(np.int32), index, value, np.zeros(n_col, np.int32))
     h.run()
     status = _MODEL_STATUS.get(h.getModelStatus(), FAILED)
     iterations = int(h.getInfo().simplex_iteration_count)
