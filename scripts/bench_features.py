@@ -61,6 +61,7 @@ def run(sample, order: str, passes: int, solver: str, seed: int) -> dict:
            "setup_seconds": seconds - sum(p.seconds for p in got.passes),
            "pass_seconds": [p.seconds for p in got.passes], "solver_calls": [p.calls for p in got.passes],
            "accepted": [p.accepted for p in got.passes], "rejected": [p.rejected for p in got.passes],
+           "shortened": [p.shortened for p in got.passes],
            "relaxation_sweeps": got.relaxation.sweeps, "relaxation_solves": got.relaxation.solves,
            "relaxation_bounded": got.relaxation.bounded, "pass_solves": [p.solves for p in got.passes],
            "cost_before": got.cost_before, "cost_after": got.cost_after,
