@@ -10,7 +10,8 @@ connectivity and pulls its vertices onto the points' features:
    vertex and the plan is relaxed by sweeps over the paper's facet
    stencils (§3.3, :data:`RELAX_SWEEPS`);
 3. ``passes`` times, every vertex moves half way to its relocation target
-   (§4.3) and the transport on its closed star is re-solved (as
+   (§4.3), or less where a face around it would turn over, and the
+   transport on its closed star is re-solved (as
    :func:`otjax.surfaces.relocation.relocate` with one round,
    :func:`otjax.surfaces.star_passes.relocate_class`); the order of the
    vertices is a fresh permutation each pass (the paper suggests it, to avoid
@@ -32,7 +33,9 @@ solved and written back by array operations
 :class:`SurfacePlan`.
 
 Relocation keeps a move only if its star's cost does not rise, so the plan's
-total cost never rises over a pass.
+total cost never rises over a pass; no face's normal ever turns 90 degrees
+or more from the input face's
+(:func:`~otjax.surfaces.star_passes.flip_free_steps`).
 """
 
 from __future__ import annotations
