@@ -57,7 +57,7 @@ from otjax.surfaces.plan import BinSettings, SurfacePlan
 from otjax.surfaces.relaxation import RelaxationStats
 from otjax.surfaces.result import SurfaceResult
 from otjax.surfaces.star_passes import OPTIONS, relax_stencils, relocate_class
-from otjax.surfaces.star_plan import StarPlan, distance2_graph
+from otjax.surfaces.star_plan import StarPlan, distance2_graph, surface_plan
 from otjax.validation import _as_float_array, check_number, check_points
 
 #: Default relative density (a multiple of the mean facet density) below which
@@ -460,7 +460,7 @@ def _recover(given: CheckedInput, passes: int, order: str, threshold: float, sol
     cost = _cost_out(frame, plan.total_cost())
     first = stats[0].cost_before if stats else cost
     return FeatureRecovery(moved, given.triangles[keep], keep, mass, density.relative, density.sorted, first,
-                           cost, tuple(stats), relaxation, plan.to_surface_plan(), frame)
+                           cost, tuple(stats), relaxation, surface_plan(plan), frame)
 
 
 def _cost_out(frame: Frame, cost: float) -> float:

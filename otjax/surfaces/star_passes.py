@@ -33,7 +33,7 @@ from otjax.lp.problem import CONVERGED, ITERATION_LIMIT, LocalLP, TransportLP
 from otjax.lp.solve import solve
 from otjax.surfaces.relaxation import GAIN, MAX_SWEEPS, TOLERANCE, RelaxationStats
 from otjax.surfaces.relocation import DAMPING, MIN_ASPECT, aspect
-from otjax.surfaces.star_plan import StarBatch, StarPlan, Stencils, sparsify, width
+from otjax.surfaces.star_plan import StarBatch, StarPlan, Stencils, face_normals, sparsify, width
 
 #: Members per batched solver call, whatever the class size, so that each
 #: stencil shape compiles once: members past a class are empty and the
@@ -253,11 +253,6 @@ def relax_stencils(plan: StarPlan, stencils: Stencils, classes_of, method: str,
 #: this share of its normal's projection on the input face's normal: no face
 #: turns over, and none is brought to the edge of turning in one move.
 FLIP_MARGIN = 0.5
-
-
-def face_normals(corners: np.ndarray) -> np.ndarray:
-    """``(F, 3)`` unnormalised normals ``(c1 - c0) x (c2 - c0)`` of triangles ``(F, 3, 3)``."""
-    return np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
 
 
 def flip_free_steps(corners: np.ndarray, slot: np.ndarray, direction: np.ndarray, reference: np.ndarray,

@@ -211,8 +211,7 @@ class StarPlan:
                                           np.c_[corner, keys[:, [2, 0, 1]].ravel()]]), axis=0)
         self.closed_star = Ragged(np.searchsorted(pairs[:, 0], np.arange(nv + 1)), pairs[:, 1])
         self.stars = Stencils(self.closed_star, self.star_facets)
-        c = self.positions[keys]
-        self.reference_normals = np.cross(c[:, 1] - c[:, 0], c[:, 2] - c[:, 0])
+        self.reference_normals = face_normals(self.positions[keys])
         self.rings = _facet_rings(keys, nv)
         used = np.unique(keys)
         _, near = scipy.spatial.cKDTree(self.positions[used]).query(self.points)
@@ -440,34 +439,39 @@ class StarPlan:
         valid = total > 0
         return np.where(valid[:, None], top / np.where(valid, total, 1.0)[:, None], self.positions[centres])
 
-    # ---------------------------------------------------------- conversion
-    def to_surface_plan(self) -> SurfacePlan:
-        """The same plan as a :class:`SurfacePlan` over a :class:`SimplicialComplex`."""
-        nv = self.n_vertices
-        keys = [tuple(map(int, k)) for k in self.bins.keys.tolist()]
-        start = self.bins.start.tolist()
-        bins = {k: Bins(self.bins.barycentric[a:b], self.bins.capacity[a:b])
-                for k, a, b in zip(keys, start[:-1], start[1:])}
-        simplex = np.where(self.entry_bin < nv, self.entry_bin,
-                           nv + self.bins.facet[np.maximum(self.entry_bin - nv, 0)])
-        order = np.argsort(simplex, kind="stable")
-        s = simplex[order]
-        cuts = np.flatnonzero(np.diff(s)) + 1
-        vertex_entries, facet_entries = {}, {}
-        for chunk in np.split(order, cuts):
-            if not len(chunk):
-                continue
-            sid = int(simplex[chunk[0]])
-            if sid < nv:
-                vertex_entries[sid] = Entries(self.entry_point[chunk], np.zeros(len(chunk), np.int64),
-                                              self.entry_mass[chunk])
-            else:
-                f = sid - nv
-                within = self.entry_bin[chunk] - nv - self.bins.start[f]
-                facet_entries[keys[f]] = Entries(self.entry_point[chunk], within, self.entry_mass[chunk])
-        complex_ = SimplicialComplex(self.positions.copy(), self.bins.keys)
-        return SurfacePlan.from_entries(complex_, self.points, self.masses, self.settings, bins, vertex_entries,
-                                        facet_entries)
+
+def surface_plan(plan: StarPlan) -> SurfacePlan:
+    """``plan`` as a :class:`SurfacePlan` over a :class:`SimplicialComplex`."""
+    nv = plan.n_vertices
+    keys = [tuple(map(int, k)) for k in plan.bins.keys.tolist()]
+    start = plan.bins.start.tolist()
+    bins = {k: Bins(plan.bins.barycentric[a:b], plan.bins.capacity[a:b])
+            for k, a, b in zip(keys, start[:-1], start[1:])}
+    simplex = np.where(plan.entry_bin < nv, plan.entry_bin,
+                       nv + plan.bins.facet[np.maximum(plan.entry_bin - nv, 0)])
+    order = np.argsort(simplex, kind="stable")
+    s = simplex[order]
+    cuts = np.flatnonzero(np.diff(s)) + 1
+    vertex_entries, facet_entries = {}, {}
+    for chunk in np.split(order, cuts):
+        if not len(chunk):
+            continue
+        sid = int(simplex[chunk[0]])
+        if sid < nv:
+            vertex_entries[sid] = Entries(plan.entry_point[chunk], np.zeros(len(chunk), np.int64),
+                                          plan.entry_mass[chunk])
+        else:
+            f = sid - nv
+            within = plan.entry_bin[chunk] - nv - plan.bins.start[f]
+            facet_entries[keys[f]] = Entries(plan.entry_point[chunk], within, plan.entry_mass[chunk])
+    complex_ = SimplicialComplex(plan.positions.copy(), plan.bins.keys)
+    return SurfacePlan.from_entries(complex_, plan.points, plan.masses, plan.settings, bins, vertex_entries,
+                                    facet_entries)
+
+
+def face_normals(corners: np.ndarray) -> np.ndarray:
+    """``(F, 3)`` unnormalised normals ``(c1 - c0) x (c2 - c0)`` of triangles ``(F, 3, 3)``."""
+    return np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
 
 
 def _facet_rings(keys: np.ndarray, n_vertices: int) -> Stencils:

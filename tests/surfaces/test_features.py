@@ -9,6 +9,7 @@ from hypothesis import strategies as st
 
 from otjax.datasets3d import holed_square, rounded_box
 from otjax.metrics3d import chamfer, crease_error, triangle_samples
+from otjax.surfaces.star_plan import surface_plan
 from otjax.surfaces.features import (
     initial_plan,
     recover_features,
@@ -207,7 +208,7 @@ def relaxed_box():
 
 def test_cut_matches_the_reference_stencils(relaxed_box):
     plan = relaxed_box
-    reference = plan.to_surface_plan()
+    reference = surface_plan(plan)
     centres = star_colouring(plan.bins.keys, plan.n_vertices, np.arange(plan.n_vertices))[0]
     batch = plan.cut(plan.stars, centres)
     for b, v in enumerate(centres.tolist()):
@@ -231,7 +232,7 @@ def test_targets_match_the_reference(relaxed_box):
     plan = relaxed_box
     centres = star_colouring(plan.bins.keys, plan.n_vertices, np.arange(plan.n_vertices))[1]
     with jax.enable_x64(True):
-        want = relocation_targets(plan.to_surface_plan(), centres.tolist())
+        want = relocation_targets(surface_plan(plan), centres.tolist())
     np.testing.assert_allclose(plan.targets(centres), want, rtol=1e-10, atol=1e-12)
 
 
