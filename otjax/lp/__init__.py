@@ -1,7 +1,7 @@
 """Local optimal-transport LPs, shared by every dimension; knows no mesh.
 
 - :mod:`otjax.lp.problem` -- a member (:class:`LocalLP`), a padded batch
-  (:class:`TransportLP`) in a few capacity classes, the solution
+  (:class:`TransportLP`) in a few capacity classes (:class:`BatchShape`), the solution
   (:class:`LPSolution`) and its status codes.
 - :mod:`otjax.lp.exact` -- HiGHS, one member at a time: the oracle and the fallback.
 - :mod:`otjax.lp.batched` -- damped Newton on the entropic semi-dual, ``jit`` + ``vmap``,
@@ -12,7 +12,7 @@
 
 from otjax.lp.batched import NewtonOptions, solve_batched
 from otjax.lp.exact import MemberSolution, solve_exact, solve_member
-from otjax.lp.problem import (CONVERGED, FAILED, INFEASIBLE, ITERATION_LIMIT, LocalLP, LPSolution,
+from otjax.lp.problem import (CONVERGED, FAILED, INFEASIBLE, ITERATION_LIMIT, BatchShape, LocalLP, LPSolution,
                               TransportLP, check_local, group_by_class, member, member_plan, pack)
 from otjax.lp.solve import MembersResult, SolveResult, solve, solve_members
 
@@ -21,6 +21,7 @@ __all__ = [
     "FAILED",
     "INFEASIBLE",
     "ITERATION_LIMIT",
+    "BatchShape",
     "LPSolution",
     "LocalLP",
     "MemberSolution",

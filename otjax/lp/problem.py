@@ -60,6 +60,22 @@ class LocalLP(NamedTuple):
         return int(self.simplex.max()) + 1 if len(self.simplex) else 0
 
 
+class BatchShape(NamedTuple):
+    """The capacities of a :class:`TransportLP` batch, ``(B, P, K, S)``.
+
+    Attributes:
+      members: ``B``, the members of the batch.
+      points: ``P``, the point capacity of each member.
+      bins: ``K``, the bin capacity of each member.
+      simplices: ``S``, the simplex capacity of each member.
+    """
+
+    members: int
+    points: int
+    bins: int
+    simplices: int
+
+
 class TransportLP(NamedTuple):
     """A padded batch of ``B`` members; a pytree of arrays (NumPy or JAX).
 
@@ -88,10 +104,10 @@ class TransportLP(NamedTuple):
     simplex_mask: np.ndarray
 
     @property
-    def shape(self) -> tuple[int, int, int, int]:
-        """``(B, P, K, S)`` capacities of this batch."""
+    def shape(self) -> BatchShape:
+        """The :class:`BatchShape` ``(B, P, K, S)``: capacities of this batch."""
         b, p, k = self.cost.shape
-        return b, p, k, self.simplex_mask.shape[1]
+        return BatchShape(b, p, k, self.simplex_mask.shape[1])
 
 
 class LPSolution(NamedTuple):
@@ -214,7 +230,7 @@ def pack(problems: Sequence[LocalLP], dtype=np.float64, shape: tuple[int, int, i
       >>> lp = LocalLP(np.array([[0.0, 1.0]]), np.ones(1), np.array([0.0, 1.0]),
       ...              np.array([0, 1]), np.array([True, False]))
       >>> pack([lp]).shape
-      (1, 8, 8, 4)
+      BatchShape(members=1, points=8, bins=8, simplices=4)
     """
     if check:
         for lp in problems:

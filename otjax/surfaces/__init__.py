@@ -42,8 +42,9 @@ from otjax.surfaces.initial_complex import InitialComplex, initial_complex, init
 from otjax.surfaces.plan import BinSettings, Stencil, SurfacePlan
 from otjax.surfaces.plot import plan_segments, plot_complex
 from otjax.surfaces.reconstruct import SurfaceReconstruction, reconstruct_surface
+from otjax.surfaces.refinement import RefineStats, refine
 from otjax.surfaces.relaxation import LocalSolution, RelaxationStats, facet_ring, relax
-from otjax.surfaces.relocation import RefineStats, RelocationStats, refine, relocate, relocation_targets
+from otjax.surfaces.relocation import RelocationStats, relocate, relocation_targets
 from otjax.surfaces.result import SurfaceResult
 from otjax.surfaces.solvers import LocalSolver, exact_solver
 

@@ -11,10 +11,10 @@ back up.
 
 Vertex moves (§4.3) go through the same protocol as the curve engine's:
 :meth:`~SurfaceEngine.propose_moves` makes each vertex's relocation
-(:func:`otjax.surfaces.relocation.propose_moves`: a few alternations of the
+(:func:`otjax.surfaces.moves.propose_moves`: a few alternations of the
 closed-form target, a move half way there and a re-solve of its closed star)
 without changing anything, and :meth:`~SurfaceEngine.apply` of a
-:class:`~otjax.surfaces.relocation.StarMove` moves the vertex, writes its
+:class:`~otjax.surfaces.moves.StarMove` moves the vertex, writes its
 star's plan and returns a :class:`SurfaceMove`. The loop
 (:func:`otjax.decimation.relocation.relocate`) applies the moves that lower
 the cost.
@@ -34,9 +34,10 @@ from otjax.lp.problem import CONVERGED
 from otjax.surfaces.collapse_scoring import (CollapseCandidate, ScoredCollapse, build_candidates,
                                              score_candidates)
 from otjax.surfaces.complex import CollapseChange
+from otjax.surfaces.moves import StarMove
+from otjax.surfaces.moves import propose_moves as propose_star_moves
 from otjax.surfaces.plan import SurfacePlan
-from otjax.surfaces.relocation import DAMPING, ROUNDS, StarMove
-from otjax.surfaces.relocation import propose_moves as propose_star_moves
+from otjax.surfaces.relocation import DAMPING, ROUNDS
 from otjax.surfaces.solvers import LocalSolver
 
 #: Sources of higher degree are not drawn (sampling rejects slots past it);
@@ -281,7 +282,7 @@ class SurfaceEngine:
 
     def propose_moves(self, vertices) -> list[tuple[int, float, tuple[StarMove]]]:
         """``[(vertex, delta, (move,))]``: the relocation of each vertex that
-        lowers the cost (:func:`otjax.surfaces.relocation.propose_moves`),
+        lowers the cost (:func:`otjax.surfaces.moves.propose_moves`),
         made on the current state, nothing changed; ``apply(move)`` applies one."""
         t0 = time.perf_counter()
         moves = propose_star_moves(self.plan, vertices, self._move_solver, self._relocation_rounds,

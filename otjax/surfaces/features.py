@@ -53,11 +53,12 @@ from tqdm.auto import tqdm
 from otjax.frame import Frame, to_canonical
 from otjax.lp.batched import NewtonOptions
 from otjax.surfaces.filtering import check_threshold, facet_density, keep_facets
+from otjax.surfaces.mesh_stencils import distance2_graph
 from otjax.surfaces.plan import BinSettings, SurfacePlan
 from otjax.surfaces.relaxation import RelaxationStats
 from otjax.surfaces.result import SurfaceResult
 from otjax.surfaces.star_passes import OPTIONS, relax_stencils, relocate_class
-from otjax.surfaces.star_plan import StarPlan, distance2_graph, surface_plan
+from otjax.surfaces.star_plan import StarPlan, surface_plan
 from otjax.validation import _as_float_array, check_number, check_points
 
 #: Default relative density (a multiple of the mean facet density) below which
@@ -256,7 +257,7 @@ def star_colouring(triangles: np.ndarray, n_vertices: int, order: np.ndarray,
       n_vertices: ``V``; ids are ``0 .. V-1``.
       order: ``(K,)`` int64 the vertices to colour, in the order they are
         coloured (each takes the smallest colour its distance-2 neighbours lack).
-      graph: the faces' :func:`~otjax.surfaces.star_plan.distance2_graph`, if
+      graph: the faces' :func:`~otjax.surfaces.mesh_stencils.distance2_graph`, if
         already made.
 
     Returns:

@@ -31,9 +31,10 @@ from otjax.lp.batched import NewtonOptions
 from otjax.lp.exact import solve_member
 from otjax.lp.problem import CONVERGED, ITERATION_LIMIT, LocalLP, TransportLP
 from otjax.lp.solve import solve
+from otjax.surfaces.mesh_stencils import Stencils
 from otjax.surfaces.relaxation import GAIN, MAX_SWEEPS, TOLERANCE, RelaxationStats
 from otjax.surfaces.relocation import DAMPING, MIN_ASPECT, aspect
-from otjax.surfaces.star_plan import StarBatch, StarPlan, Stencils, face_normals, sparsify, width
+from otjax.surfaces.star_plan import StarBatch, StarPlan, face_normals, sparsify, width
 
 #: Members per batched solver call, whatever the class size, so that each
 #: stencil shape compiles once: members past a class are empty and the

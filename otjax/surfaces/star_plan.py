@@ -12,10 +12,11 @@ The local problem of a vertex ``v`` is its closed star: the vertex bins of
 ``v`` and of its neighbours and the bins of the facets around ``v`` (the
 stencil :func:`otjax.surfaces.relocation.relocate` re-solves). Vertices whose
 closed stars share no vertex own disjoint sets of bins, so for such a set
-(:func:`distance2_graph` colours them) each bin has at most one owner, and
-cutting out, pricing and writing back all their problems is a handful of
-NumPy operations over the entry arrays (:meth:`StarPlan.cut`,
-:meth:`StarPlan.replace`).
+(:func:`~otjax.surfaces.mesh_stencils.distance2_graph` colours them) each
+bin has at most one owner, and cutting out, pricing and writing back all
+their problems is a handful of NumPy operations over the entry arrays
+(:meth:`StarPlan.cut`, :meth:`StarPlan.replace`). The mesh's stars and
+facet rings as CSR rows are :mod:`otjax.surfaces.mesh_stencils`.
 """
 
 from __future__ import annotations
@@ -23,11 +24,11 @@ from __future__ import annotations
 from typing import NamedTuple
 
 import numpy as np
-import scipy.sparse
 import scipy.spatial
 
 from otjax.surfaces.bins import facet_bins
 from otjax.surfaces.complex import SimplicialComplex
+from otjax.surfaces.mesh_stencils import Ragged, Stencils, distance2_graph, facet_rings
 from otjax.surfaces.plan import ENTRY_FLOOR, Bins, BinSettings, Entries, SurfacePlan
 
 
@@ -48,49 +49,6 @@ class MeshBins(NamedTuple):
     barycentric: np.ndarray
     capacity: np.ndarray
     facet: np.ndarray
-
-
-class Ragged(NamedTuple):
-    """Rows of variable length (CSR): row ``r`` is ``index[ptr[r]:ptr[r + 1]]``."""
-
-    ptr: np.ndarray
-    index: np.ndarray
-
-    def take(self, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """``(values, row, column)`` of the concatenated ``rows`` ``(B,)``: each
-        value, the position in ``rows`` it came from, its place in that row."""
-        rows = np.asarray(rows, np.int64)
-        lo, n = self.ptr[rows], self.ptr[rows + 1] - self.ptr[rows]
-        row = np.repeat(np.arange(len(rows)), n)
-        column = np.arange(int(n.sum())) - np.repeat(np.cumsum(n) - n, n)
-        return self.index[lo[row] + column], row, column
-
-
-def ragged(values: np.ndarray, row: np.ndarray, n_rows: int) -> Ragged:
-    """The :class:`Ragged` of ``values`` grouped by ``row`` (non-decreasing, ``< n_rows``)."""
-    return Ragged(np.concatenate([[0], np.cumsum(np.bincount(row, minlength=n_rows))]).astype(np.int64),
-                  np.asarray(values, np.int64))
-
-
-class Stencils(NamedTuple):
-    """Local problems given by their simplices, one row each: sorted vertex
-    ids and sorted facets (rows of :attr:`MeshBins.keys`)."""
-
-    vertices: Ragged
-    facets: Ragged
-
-    def take(self, rows: np.ndarray) -> Stencils:
-        """The stencils ``rows`` ``(B,)``, in that order."""
-        v, vrow, _ = self.vertices.take(rows)
-        f, frow, _ = self.facets.take(rows)
-        return Stencils(ragged(v, vrow, len(rows)), ragged(f, frow, len(rows)))
-
-    def incidence(self, n_columns: int, facets: bool = False) -> scipy.sparse.csr_matrix:
-        """``(rows, n_columns)`` CSR, 1 where a stencil holds a vertex (or, with ``facets``, a facet)."""
-        r = self.facets if facets else self.vertices
-        n = len(r.ptr) - 1
-        row = np.repeat(np.arange(n), np.diff(r.ptr))
-        return scipy.sparse.csr_matrix((np.ones(len(row)), (row, r.index)), shape=(n, n_columns))
 
 
 class StarBatch(NamedTuple):
@@ -149,19 +107,6 @@ def width(n: int, smallest: int) -> int:
     return size
 
 
-def distance2_graph(triangles: np.ndarray, n_vertices: int) -> scipy.sparse.csr_matrix:
-    """``(V, V)`` CSR, nonzero where two vertices' closed stars share a vertex
-    (they are at most two edges apart), the diagonal included."""
-    t = np.asarray(triangles, np.int64).reshape(-1, 3)
-    a = np.concatenate([t[:, 0], t[:, 1], t[:, 2], t[:, 1], t[:, 2], t[:, 0]])
-    b = np.concatenate([t[:, 1], t[:, 2], t[:, 0], t[:, 0], t[:, 1], t[:, 2]])
-    ring = scipy.sparse.csr_matrix((np.ones(len(a)), (a, b)), shape=(n_vertices, n_vertices))
-    ring = (ring + scipy.sparse.identity(n_vertices, format="csr")).tocsr()
-    two = (ring @ ring).tocsr()
-    two.sort_indices()
-    return two
-
-
 class StarPlan:
     """A sparse transport plan of weighted points onto a fixed mesh's bins.
 
@@ -181,7 +126,7 @@ class StarPlan:
       stars: :class:`Stencils` the closed star of each vertex (row ``v``);
       rings: :class:`Stencils` the paper's stencil of each facet (row ``f``):
         it, the facets sharing an edge with it, and their vertices (§3.3);
-      two: :func:`distance2_graph` of the mesh;
+      two: :func:`~otjax.surfaces.mesh_stencils.distance2_graph` of the mesh;
       reference_normals: ``(T, 3)`` ``(c1 - c0) x (c2 - c0)`` of each facet
         (corners in key order) at the given ``positions``: the orientation
         moves must keep (:func:`otjax.surfaces.star_passes.relocate_class`).
@@ -212,7 +157,7 @@ class StarPlan:
         self.closed_star = Ragged(np.searchsorted(pairs[:, 0], np.arange(nv + 1)), pairs[:, 1])
         self.stars = Stencils(self.closed_star, self.star_facets)
         self.reference_normals = face_normals(self.positions[keys])
-        self.rings = _facet_rings(keys, nv)
+        self.rings = facet_rings(keys, nv)
         used = np.unique(keys)
         _, near = scipy.spatial.cKDTree(self.positions[used]).query(self.points)
         self.entry_point = np.arange(len(self.points), dtype=np.int64)
@@ -472,24 +417,6 @@ def surface_plan(plan: StarPlan) -> SurfacePlan:
 def face_normals(corners: np.ndarray) -> np.ndarray:
     """``(F, 3)`` unnormalised normals ``(c1 - c0) x (c2 - c0)`` of triangles ``(F, 3, 3)``."""
     return np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
-
-
-def _facet_rings(keys: np.ndarray, n_vertices: int) -> Stencils:
-    """The paper's stencil of each facet of ``keys`` ``(T, 3)``: it, the facets
-    sharing an edge with it, and their vertices, each sorted."""
-    t = len(keys)
-    edges = np.concatenate([keys[:, [0, 1]], keys[:, [0, 2]], keys[:, [1, 2]]])
-    _, edge = np.unique(edges[:, 0] * n_vertices + edges[:, 1], return_inverse=True)
-    by_edge = scipy.sparse.csr_matrix((np.ones(3 * t), (np.tile(np.arange(t), 3), edge.ravel())),
-                                      shape=(t, int(edge.max(initial=-1)) + 1))
-    ring = (by_edge @ by_edge.T).tocsr()
-    ring.sort_indices()
-    corners = scipy.sparse.csr_matrix((np.ones(3 * t), (np.repeat(np.arange(t), 3), keys.ravel())),
-                                      shape=(t, n_vertices))
-    verts = (ring @ corners).tocsr()
-    verts.sort_indices()
-    return Stencils(Ragged(verts.indptr.astype(np.int64), verts.indices.astype(np.int64)),
-                    Ragged(ring.indptr.astype(np.int64), ring.indices.astype(np.int64)))
 
 
 def sparsify(mass: np.ndarray, plans: np.ndarray) -> np.ndarray:

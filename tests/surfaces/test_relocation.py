@@ -10,11 +10,12 @@ from otjax.lp.exact import solve_member
 from otjax.lp.problem import FAILED
 from otjax.surfaces.complex import SimplicialComplex
 from otjax.surfaces.fixed_plan_cost import fixed_plan_cost
+from otjax.surfaces.moves import local_target, propose_moves, star_stencil, stencil_plan
+from otjax.surfaces.packed_entries import pack_entries, star_simplices
 from otjax.surfaces.plan import BinSettings, Entries, SurfacePlan
+from otjax.surfaces.refinement import refine
 from otjax.surfaces.relaxation import LocalSolution
-from otjax.surfaces.relocation import (MIN_ASPECT, local_target, pack_entries, propose_moves, refine, relocate,
-                                       relocation_targets, star_simplices, star_stencil, star_targets,
-                                       stencil_plan)
+from otjax.surfaces.relocation import MIN_ASPECT, relocate, relocation_targets, star_targets
 from tests.surfaces.complexes import delaunay_complex
 from tests.surfaces.test_transport_plan import grid_complex
 
