@@ -18,8 +18,8 @@ simplices leaves every other entry of the plan as it was. Hence::
 is the change of the global cost when the solved plan is applied.
 
 Every candidate's LP is solved together (:func:`solve_all`): batches of a
-fixed size and a few padded shapes for the JAX solver, HiGHS for the members
-it does not certify (or for all, ``method="exact"``).
+fixed size and a few padded shapes for the JAX solver, HiGHS for small
+groups and for the members it does not certify (or for all, ``method="exact"``).
 """
 
 from __future__ import annotations
@@ -30,18 +30,9 @@ from typing import NamedTuple
 import numpy as np
 
 from otjax.lp.batched import NewtonOptions
-from otjax.lp.exact import MemberSolution, closed_form_solution, solve_member
-from otjax.lp.problem import (
-    CONVERGED,
-    ITERATION_LIMIT,
-    MIN_BINS,
-    MIN_POINTS,
-    LocalLP,
-    capacity_class,
-    member_plan,
-    pack,
-)
-from otjax.lp.solve import solve
+from otjax.lp.exact import MemberSolution
+from otjax.lp.problem import CONVERGED, ITERATION_LIMIT, LocalLP
+from otjax.lp.solve import solve_members
 from otjax.surfaces.complex import SimplicialComplex, Triangle, replace_vertex
 from otjax.surfaces.plan import Stencil, SurfacePlan
 
@@ -50,9 +41,6 @@ METHODS = ("auto", "exact")
 #: smallest angle) is below this is degenerate: its bins' barycentric
 #: coordinates would be ill-conditioned, and a flat facet has none.
 DEGENERATE = 1e-8
-#: Members per padded batch of the JAX solver: one batch size, so the
-#: compiled shapes are the ``(points, bins)`` capacity classes only.
-BATCH = 16
 
 
 class CollapseCandidate(NamedTuple):
@@ -194,38 +182,13 @@ def build_candidates(plan: SurfacePlan, half_edges, bin_cache: dict | None = Non
 
 
 def solve_all(problems: Sequence[LocalLP], method: str = "auto", options: NewtonOptions = NewtonOptions()) -> Solved:
-    """Solves every problem: closed forms first, then (``"auto"``) the JAX
-    solver on padded batches of :data:`BATCH` members grouped by their
-    ``(points, bins)`` capacity class, HiGHS for the members it did not
-    certify; ``"exact"``: HiGHS for all. Needs JAX's x64 mode for ``"auto"``.
+    """Solves every problem by :func:`otjax.lp.solve.solve_members` (closed
+    forms first, then padded batches of a few shapes, HiGHS for small groups
+    and for the members the batched solver did not certify; ``"exact"``:
+    HiGHS for all). Needs JAX's x64 mode for ``"auto"``.
     """
-    if method not in METHODS:
-        raise ValueError(f"method must be one of {METHODS}, got {method!r}")
-    out: list[MemberSolution | None] = [None] * len(problems)
-    if method == "exact":
-        return Solved([solve_member(lp) for lp in problems], 0, 0)
-    groups: dict[tuple[int, int], list[int]] = {}
-    for i, lp in enumerate(problems):
-        out[i] = closed_form_solution(lp) if len(lp.mass) else solve_member(lp)
-        if out[i] is None:
-            p, k = lp.cost.shape
-            groups.setdefault((capacity_class(p, MIN_POINTS), capacity_class(k, MIN_BINS)), []).append(i)
-    resolves = calls = 0
-    for (p, k), idx in sorted(groups.items()):
-        for lo in range(0, len(idx), BATCH):
-            chunk = idx[lo:lo + BATCH]
-            # Padding the simplex axis to the bins' keeps one shape per (P, K) class.
-            batch = pack([problems[i] for i in chunk], shape=(p, k, k), batch=BATCH)
-            result = solve(batch, "auto", options)
-            resolves += result.exact_resolves
-            calls += 1
-            sol = result.solution
-            for b, i in enumerate(chunk):
-                s = problems[i].n_simplices
-                out[i] = MemberSolution(member_plan(sol, batch, b), np.asarray(sol.density[b, :s]),
-                                        np.asarray(sol.simplex_mass[b, :s]), float(sol.cost[b]),
-                                        int(sol.status[b]), int(sol.iterations[b]))
-    return Solved(out, resolves, calls)  # type: ignore[arg-type]
+    got = solve_members(problems, method, options)
+    return Solved(got.solutions, got.exact_resolves, got.batched_calls)
 
 
 def score_candidates(candidates: Sequence[CollapseCandidate], method: str = "auto",

@@ -156,9 +156,34 @@ def test_solve_members_solves_closed_form_members_without_a_batch(monkeypatch):
     monkeypatch.setattr(solve_module, "pack", lambda members, **kw: packed.append(len(members)) or
                         real_pack(members, **kw))
     result = solve_members([single, general], method="exact")
-    assert packed == [1]  # only the general member went into a batch
+    assert packed == []  # HiGHS takes each member as it is
     assert result.solutions[0].closed_form and not result.solutions[1].closed_form
     from otjax.lp.exact import solve_member
 
     for lp, sol in zip([single, general], result.solutions):
         assert sol.cost == pytest.approx(solve_member(lp).cost, rel=1e-9, abs=1e-12)
+
+
+def test_auto_batches_only_groups_worth_a_compiled_shape(monkeypatch):
+    solve_module = importlib.import_module("otjax.lp.solve")
+    from otjax.lp.exact import solve_member
+
+    rng = np.random.default_rng(19)
+    single = random_stencil(rng, 15, 3, 2, 1, noise=0.0)
+    group = [random_stencil(rng, 20 + i, 12, 2, 1) for i in range(solve_module.MIN_BATCH)]
+    odd = random_stencil(rng, 90, 40, 3, 2)  # alone in its padded shape
+    assert len({solve_module.member_shape(lp) for lp in group}) == 1
+    assert solve_module.member_shape(odd) != solve_module.member_shape(group[0])
+    packed = []
+    real_pack = solve_module.pack
+    monkeypatch.setattr(solve_module, "pack", lambda members, **kw: packed.append((len(members), kw["batch"]))
+                        or real_pack(members, **kw))
+    members = [single, *group, odd]
+    result = solve_members(members, method="auto")
+    assert packed == [(len(group), solve_module.BATCH)]
+    assert result.batched_calls == 1
+    assert result.solutions[0].closed_form
+    for lp, sol in zip(members, result.solutions):
+        assert sol.status == CONVERGED and sol.plan.shape == lp.cost.shape
+        np.testing.assert_allclose(sol.plan.sum(axis=1), lp.mass, rtol=1e-6)
+        assert sol.cost == pytest.approx(solve_member(lp).cost, rel=2e-3)
