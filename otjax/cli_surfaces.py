@@ -16,7 +16,7 @@ from otjax import datasets3d
 from otjax.io import check_output_paths, write_files
 from otjax.io3d import read_mesh, read_points3d
 from otjax.surfaces.features import recover_features
-from otjax.surfaces.reconstruct import reconstruct_surface
+from otjax.surfaces.reconstruct import reconstruct_surface, surface_solver
 from otjax.surfaces.result import SAVE_EXTENSIONS
 from otjax.validation import check_number
 
@@ -39,7 +39,7 @@ def _outputs(p: argparse.ArgumentParser) -> None:
                    help="examples only: Gaussian noise, a fraction of the bounding-box diagonal")
     p.add_argument("--solver", choices=("batched", "exact"),
                    help="local LP solver: batched JAX (HiGHS for what it does not certify) or HiGHS alone "
-                   "(default: batched for surface; for recover, HiGHS on a CPU and batched on an accelerator)")
+                   "(default: HiGHS on a CPU, batched on an accelerator)")
     p.add_argument("--quiet", action="store_true", help="print nothing but errors")
 
 
@@ -95,7 +95,7 @@ def _run_surface(args, usage) -> int:
     else:
         points, masses = read_points3d(args.input)
     n_vertices = EXAMPLE_VERTICES if args.n_vertices is None else args.n_vertices
-    solver = args.solver or "batched"
+    solver = surface_solver(args.solver)
     params = {"n_vertices": n_vertices, "queue": args.queue, "seed": args.seed, "solver": solver}
     run = reconstruct_surface(points, masses, n_vertices, queue=args.queue, seed=args.seed, solver=solver,
                               progress=not args.quiet)

@@ -30,7 +30,8 @@ from bench_surface_lp import machine, write_json
 
 from otjax.datasets3d import rounded_box
 from otjax.metrics3d import chamfer, crease_error
-from otjax.surfaces.features import default_solver, recover_features
+from otjax.surfaces.features import recover_features
+from otjax.surfaces.solvers import default_solver
 
 
 def quality(vertices, triangles, truth) -> dict:

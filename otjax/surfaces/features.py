@@ -57,6 +57,7 @@ from otjax.surfaces.mesh_stencils import distance2_graph
 from otjax.surfaces.plan import BinSettings, SurfacePlan
 from otjax.surfaces.relaxation import RelaxationStats
 from otjax.surfaces.result import SurfaceResult
+from otjax.surfaces.solvers import default_solver
 from otjax.surfaces.star_passes import OPTIONS, relax_stencils, relocate_class
 from otjax.surfaces.star_plan import StarPlan, surface_plan
 from otjax.validation import _as_float_array, check_number, check_points
@@ -355,13 +356,6 @@ def facet_masses(plan: StarPlan, triangles: np.ndarray) -> np.ndarray:
 
 
 # ---------------------------------------------------------------- entry point
-def default_solver() -> str:
-    """The local LP solver when none is asked for: ``"exact"`` (HiGHS) on a
-    CPU backend, where it solves the small star problems faster than the
-    batched solver, ``"auto"`` on an accelerator (docs/decisions.md#feature_recovery_batches)."""
-    return "exact" if jax.default_backend() == "cpu" else "auto"
-
-
 def recover_features(points, mesh, masses=None, *, passes: int = PASSES, order: str = "colouring",
                      density_threshold: float = DENSITY_THRESHOLD, solver: str | None = None, seed: int = 0,
                      progress: bool = False) -> SurfaceResult:

@@ -26,7 +26,7 @@ from otjax.surfaces.initial_complex import FRACTION, initial_complex
 from otjax.surfaces.plan import BinSettings, Entries, SurfacePlan
 from otjax.surfaces.relaxation import relax
 from otjax.surfaces.result import SurfaceResult
-from otjax.surfaces.solvers import LocalSolver
+from otjax.surfaces.solvers import LocalSolver, default_solver
 from otjax.validation import check_number, check_points, check_target
 
 SOLVERS = ("batched", "exact")
@@ -85,7 +85,7 @@ class SurfaceReconstruction(NamedTuple):
 
 
 def reconstruct_surface(points, masses=None, n_vertices: int = 100, *, queue: str = "multiple-choice",
-                        choices: int = 40, switch_factor: float = 1.0, seed: int = 0, solver: str = "batched",
+                        choices: int = 40, switch_factor: float = 1.0, seed: int = 0, solver: str | None = None,
                         fraction: float = FRACTION, rebin: bool = REBIN, max_sweeps: int = 10,
                         relocation: int | None = None, final_relocations: int = FINAL_RELOCATIONS,
                         progress: bool = False) -> SurfaceReconstruction:
@@ -101,7 +101,8 @@ def reconstruct_surface(points, masses=None, n_vertices: int = 100, *, queue: st
         below this many times ``n_vertices`` (1: never, as in the paper).
       seed: seeds the subset, bins and draws; same seed, same result.
       solver: ``"batched"`` (JAX batches, HiGHS for members they do not
-        certify) or ``"exact"`` (HiGHS for every local LP).
+        certify) or ``"exact"`` (HiGHS for every local LP); ``None``
+        (default): :func:`surface_solver`, HiGHS on a CPU.
       fraction: share of the points in the initial Delaunay (§4.1).
       rebin: give every facet the default bins before decimating.
       max_sweeps: relaxation sweeps of the initial complex at most.
@@ -127,6 +128,7 @@ def reconstruct_surface(points, masses=None, n_vertices: int = 100, *, queue: st
       >>> r = reconstruct_surface(pts, n_vertices=10, solver="exact")  # doctest: +SKIP
     """
     t0 = time.perf_counter()
+    solver = surface_solver(solver)
     points, masses = _checked(points, masses, n_vertices, queue, choices, switch_factor, solver, fraction)
     seed = check_number("seed", seed, integer=True)
     relocation = check_number("relocation", relocation, minimum=0, integer=True, allow_none=True)
@@ -161,6 +163,15 @@ def reconstruct_surface(points, masses=None, n_vertices: int = 100, *, queue: st
                 break
         seconds["final_relocation"] = time.perf_counter() - t3
     return _result(plan, frame, stats, seconds)
+
+
+def surface_solver(solver: str | None) -> str:
+    """``solver``, or where it is ``None`` the default of the backend:
+    ``"exact"`` on a CPU, ``"batched"`` on an accelerator
+    (:func:`~otjax.surfaces.solvers.default_solver`)."""
+    if solver is not None:
+        return solver
+    return "exact" if default_solver() == "exact" else "batched"
 
 
 def _checked(points, masses, n_vertices, queue, choices, switch_factor, solver, fraction):
