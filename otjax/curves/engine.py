@@ -128,7 +128,7 @@ class CurveEngine:
         return {**self.counts, "kernel_calls": self.scorer.calls, "seconds": dict(self.seconds)}
 
     def score(self, sources, targets: dict | None = None, *, veto=None, keep: bool = True,
-              while_waiting=None) -> list[tuple[tuple[int, int], float]]:
+              while_waiting=None, cheapest_only: bool = False) -> list[tuple[tuple[int, int], float]]:
         """Scores the half-edges leaving ``sources``, batch by batch.
 
         Args:
@@ -141,6 +141,8 @@ class CurveEngine:
             are left out.
           keep: keep the stencils at hand for :meth:`take`.
           while_waiting: host work to run once every batch is dispatched.
+          cheapest_only: accepted for the loop's protocol; every candidate
+            is scored (one kernel call scores a batch whatever its order).
 
         Returns:
           ``[(half-edge, delta)]`` of the admissible candidates.

@@ -46,7 +46,8 @@ class Engine(Protocol):
     Half-edges are ``(source, target)`` vertex pairs; a collapse removes
     ``source``. ``versions[v]`` changes whenever a change touches the
     half-edges leaving ``v``. ``score`` returns ``[(half-edge, delta)]`` of
-    the admissible ones; ``take`` returns opaque scored candidates that
+    the admissible ones (with ``cheapest_only``, it may leave out those it
+    can show are not the cheapest); ``take`` returns opaque scored candidates that
     ``apply(*taken)`` applies, returning a change with ``dirty`` (vertices to
     score again) and ``ring`` (the source's one-ring). ``propose_moves``
     returns ``[(vertex, delta, scored)]`` for :func:`otjax.decimation.relocation.relocate`.
@@ -58,7 +59,8 @@ class Engine(Protocol):
     def live_sources(self) -> list[int]: ...
     def ring(self, v: int) -> tuple[int, ...]: ...
     def free(self, v: int) -> bool: ...
-    def score(self, sources, targets=None, *, veto=None, keep=True, while_waiting=None) -> list: ...
+    def score(self, sources, targets=None, *, veto=None, keep=True, while_waiting=None,
+              cheapest_only=False) -> list: ...
     def take(self, keys) -> list: ...
     def apply(self, *taken): ...
     def movable(self, v: int) -> bool: ...
@@ -146,9 +148,12 @@ def _rank(run: Run, sources) -> Callable:
     return order
 
 
-def score(run: Run, sources, targets=None, *, keep: bool = True, while_waiting=None) -> None:
-    """Scores the half-edges leaving ``sources`` into the table."""
-    entries = run.engine.score(sources, targets, veto=run.veto, keep=keep, while_waiting=while_waiting)
+def score(run: Run, sources, targets=None, *, keep: bool = True, while_waiting=None,
+          cheapest_only: bool = False) -> None:
+    """Scores the half-edges leaving ``sources`` into the table (with
+    ``cheapest_only``, the engine may leave out those that cannot be the cheapest)."""
+    entries = run.engine.score(sources, targets, veto=run.veto, keep=keep, while_waiting=while_waiting,
+                               cheapest_only=cheapest_only)
     run.table.enter(entries, _rank(run, sources) if run.table.use_heap else None)
 
 
@@ -220,7 +225,9 @@ def run_multiple_choice(run: Run, rng: np.random.Generator, choices: int, switch
             if not table.fresh((u, w)):
                 stale.setdefault(u, []).append(w)
         if stale:
-            score(run, stale, stale, while_waiting=prefetch_next_draw)
+            # Only the cheapest draw is collapsed: a half-edge that cannot beat
+            # it may stay unscored (it is scored when drawn again).
+            score(run, stale, stale, while_waiting=prefetch_next_draw, cheapest_only=True)
         best = min(((table.delta(h), h) for h in drawn if table.fresh(h)), default=None)
         if best is None:
             break

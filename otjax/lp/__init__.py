@@ -13,7 +13,7 @@
 from otjax.lp.batched import NewtonOptions, solve_batched
 from otjax.lp.exact import MemberSolution, solve_exact, solve_member
 from otjax.lp.problem import (CONVERGED, FAILED, INFEASIBLE, ITERATION_LIMIT, BatchShape, LocalLP, LPSolution,
-                              TransportLP, check_local, group_by_class, member, member_plan, pack)
+                              TransportLP, check_local, group_by_class, lower_bound, member, member_plan, pack)
 from otjax.lp.solve import MembersResult, SolveResult, solve, solve_members
 
 __all__ = [
@@ -31,6 +31,7 @@ __all__ = [
     "TransportLP",
     "check_local",
     "group_by_class",
+    "lower_bound",
     "member",
     "member_plan",
     "pack",

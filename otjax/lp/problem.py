@@ -176,6 +176,20 @@ def check_local(lp: LocalLP) -> None:
             raise ValueError("a simplex id is used by both vertex and facet bins")
 
 
+def lower_bound(lp: LocalLP) -> float:
+    """``sum_i m_i min_j C_ij``: no plan of the member costs less (0 without
+    points or bins).
+
+    Example:
+      >>> lower_bound(LocalLP(np.array([[4.0, 1.0]]), np.array([2.0]), np.array([0.0, 1.0]),
+      ...                     np.array([0, 1]), np.array([True, False])))
+      2.0
+    """
+    if lp.cost.size == 0:
+        return 0.0
+    return float(np.dot(lp.mass, lp.cost.min(axis=1)))
+
+
 def capacity_class(n: int, smallest: int) -> int:
     """The padded size of an axis holding ``n`` entries: a power of two ``>= smallest``.
 

@@ -30,7 +30,8 @@ import numpy as np
 
 from otjax.lp.batched import NewtonOptions
 from otjax.lp.exact import solve_member
-from otjax.lp.problem import CONVERGED
+from otjax.lp.problem import CONVERGED, lower_bound
+from otjax.lp.solve import BATCH
 from otjax.surfaces.collapse_scoring import (CollapseCandidate, ScoredCollapse, build_candidates,
                                              score_candidates)
 from otjax.surfaces.complex import CollapseChange
@@ -120,7 +121,7 @@ class SurfaceEngine:
         self._hot: OrderedDict = OrderedDict()  # (source, target) -> (version, CollapseCandidate)
         self._bins: dict = {}  # bins of facets that may appear, valid while no vertex moves
         self.counts = {"scored": 0, "updated": 0, "partial": 0, "refused": 0, "exact_resolves": 0,
-                       "kernel_calls": 0, "moves_proposed": 0}
+                       "kernel_calls": 0, "moves_proposed": 0, "pruned": 0}
         self.seconds = {"export": 0.0, "score": 0.0, "propose_moves": 0.0}
         self._relocation_rounds = relocation_rounds
         self._damping = damping
@@ -158,40 +159,81 @@ class SurfaceEngine:
         return {**self.counts, "seconds": dict(self.seconds)}
 
     def score(self, sources, targets: dict | None = None, *, veto=None, keep: bool = True,
-              while_waiting=None) -> list[tuple[tuple[int, int], float]]:
-        """Scores the half-edges leaving ``sources`` (all, or ``targets[v]``)
-        in one batched solve; returns ``[(half-edge, delta)]`` of the
-        admissible ones that ``veto(candidate, scored)`` (if given) accepts.
-        ``while_waiting`` is not called: nothing is prefetched."""
+              while_waiting=None, cheapest_only: bool = False) -> list[tuple[tuple[int, int], float]]:
+        """Scores the half-edges leaving ``sources`` (all, or ``targets[v]``);
+        returns ``[(half-edge, delta)]`` of the admissible ones that
+        ``veto(candidate, scored)`` (if given) accepts.
+
+        With ``cheapest_only`` the caller wants the cheapest of them alone:
+        candidates are solved in increasing order of a lower bound of their
+        delta (:func:`~otjax.lp.problem.lower_bound` of the local LP, minus
+        the cost it replaces), and those whose bound is not below the
+        cheapest admissible delta found so far are left unscored (not
+        returned). The cheapest is the same as with every candidate scored.
+        ``while_waiting`` is not called: nothing is prefetched.
+        """
         c = self.plan.complex
         keys = [(v, w) for v in sorted(sources) if c.alive[v]
                 for w in (c.neighbors(v) if targets is None else targets[v]) if c.alive[w] and c.has_edge(v, w)]
-        scored = self.score_half_edges(keys)
+        admissible = (lambda s: veto is None or veto(s.candidate, s))
+        scored = self.score_half_edges(keys, cheapest_of=admissible if cheapest_only else None)
         out = []
         for key, s in zip(keys, scored):
-            if s is None or (veto is not None and not veto(s.candidate, s)):
+            if s is None or not admissible(s):
                 continue
             out.append((key, s.delta))
             if keep:
                 self._keep(key, s.candidate)
         return out
 
-    def score_half_edges(self, keys) -> list[ScoredCollapse | None]:
-        """``ScoredCollapse`` of each half-edge (``None``: refused), one solve for all."""
+    def score_half_edges(self, keys, cheapest_of=None) -> list[ScoredCollapse | None]:
+        """``ScoredCollapse`` of each half-edge (``None``: refused), one solve
+        for all; with ``cheapest_of`` (a filter of scored candidates), as
+        :meth:`score`'s ``cheapest_only``, ``None`` also for those left unscored."""
         t0 = time.perf_counter()
         cands = build_candidates(self.plan, keys, self._bins)
         live = [c for c in cands if c is not None]
         t1 = time.perf_counter()
-        scored, solved = score_candidates(live, "exact" if self.method == "exact" else "auto", self.options)
+        if cheapest_of is None:
+            scored = self._solve(live)
+        else:
+            scored = self._solve_cheapest(live, cheapest_of)
         self.seconds["export"] += t1 - t0
         self.seconds["score"] += time.perf_counter() - t1
-        self.counts["scored"] += len(live)
-        self.counts["refused"] += len(cands) - len(live) + sum(s is None for s in scored)
-        self.counts["exact_resolves"] += solved.exact_resolves
-        self.counts["kernel_calls"] += solved.kernel_calls
-        self.sizes.extend(c.stencil.lp.cost.shape for c in live)
+        self.counts["refused"] += len(cands) - len(live)
         it = iter(scored)
         return [None if c is None else next(it) for c in cands]
+
+    def _solve(self, cands: list[CollapseCandidate]) -> list[ScoredCollapse | None]:
+        """Scores ``cands`` in one solve, counting."""
+        scored, solved = score_candidates(cands, "exact" if self.method == "exact" else "auto", self.options)
+        self.counts["scored"] += len(cands)
+        self.counts["refused"] += sum(s is None for s in scored)
+        self.counts["exact_resolves"] += solved.exact_resolves
+        self.counts["kernel_calls"] += solved.kernel_calls
+        self.sizes.extend(c.stencil.lp.cost.shape for c in cands)
+        return scored
+
+    def _solve_cheapest(self, cands: list[CollapseCandidate], admissible) -> list[ScoredCollapse | None]:
+        """Scores ``cands`` in increasing order of their bound until no bound
+        is below the cheapest admissible delta; the others stay ``None``.
+        HiGHS takes them one at a time, the batched solver a batch at a time."""
+        bound = np.array([lower_bound(c.stencil.lp) - c.stencil.cost for c in cands])
+        order = np.argsort(bound, kind="stable")
+        step = 1 if self.method == "exact" else BATCH
+        out: list[ScoredCollapse | None] = [None] * len(cands)
+        best, solved = np.inf, 0
+        for lo in range(0, len(order), step):
+            group = [int(i) for i in order[lo:lo + step] if bound[i] < best]
+            if not group:
+                break
+            solved += len(group)
+            for i, s in zip(group, self._solve([cands[i] for i in group])):
+                out[i] = s
+                if s is not None and admissible(s):
+                    best = min(best, s.delta)
+        self.counts["pruned"] += len(cands) - solved
+        return out
 
     def _keep(self, key, cand: CollapseCandidate) -> None:
         self._hot[key] = (self._versions[key[0]], cand)

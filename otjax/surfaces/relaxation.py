@@ -17,7 +17,7 @@ from typing import Callable, NamedTuple, Sequence
 import numpy as np
 import scipy.spatial
 
-from otjax.lp.problem import CONVERGED, ITERATION_LIMIT, LocalLP
+from otjax.lp.problem import CONVERGED, ITERATION_LIMIT, LocalLP, lower_bound
 from otjax.surfaces.complex import SimplicialComplex, Triangle, triangle_key
 from otjax.surfaces.plan import SurfacePlan
 
@@ -156,7 +156,7 @@ def relax(plan: SurfacePlan, solve: Solver, stencil_of: StencilRule | None = Non
             ids = [order[i] for i in members]
             solved_at[ids] = clock
             cut = [s for s in (plan.stencil(*simplices[i]) for i in ids) if len(s.points)]
-            cut = [s for s in cut if _lower_bound(s.lp) < s.cost * (1.0 - GAIN)]
+            cut = [s for s in cut if lower_bound(s.lp) < s.cost * (1.0 - GAIN)]
             bounded += len(members) - len(cut)
             if not cut:
                 continue
@@ -177,13 +177,6 @@ def relax(plan: SurfacePlan, solve: Solver, stencil_of: StencilRule | None = Non
         if previous - total <= tolerance * previous:
             break
     return RelaxationStats(tuple(costs), solves, accepted, n_rounds, unconverged, ruled_out, bounded)
-
-
-def _lower_bound(lp: LocalLP) -> float:
-    """``sum_i m_i min_j C_ij``: no plan of the member costs less."""
-    if lp.cost.size == 0:
-        return 0.0
-    return float(np.dot(lp.mass, lp.cost.min(axis=1)))
 
 
 class StencilIndex:

@@ -126,10 +126,13 @@ class CycleEngine:
     def movable(self, v: int) -> bool:
         return v in self.alive and v not in self.pinned
 
-    def score(self, sources, targets=None, *, veto=None, keep=True, while_waiting=None):
+    def score(self, sources, targets=None, *, veto=None, keep=True, while_waiting=None, cheapest_only=False):
+        """As the protocol; with ``cheapest_only`` it leaves out every
+        admissible candidate but the cheapest (and its ties), the most a
+        real engine may leave out."""
         sources = sorted(sources)
         self.score_calls.append(sources)
-        out = []
+        found = []
         for v in sources:
             if v not in self.alive or v in self.pinned or len(self.ring(v)) > self.degree_bound:
                 continue
@@ -137,10 +140,16 @@ class CycleEngine:
                 if (targets is not None and w not in targets[v]) or not self.free(w):
                     continue
                 cand, d = Collapse(v, w), self.delta(v, w)
-                self.n_scored += 1
-                self.scored[cand] = (d, self.versions[v])
-                if veto is None or veto(cand, d):
-                    out.append(((v, w), d))
+                found.append((cand, d, veto is None or veto(cand, d)))
+        if cheapest_only:
+            best = min((d for _, d, ok in found if ok), default=None)
+            found = [f for f in found if f[2] and f[1] == best]
+        out = []
+        for cand, d, ok in found:
+            self.n_scored += 1
+            self.scored[cand] = (d, self.versions[cand.source])
+            if ok:
+                out.append(((cand.source, cand.target), d))
         self.calls += 1
         if while_waiting is not None:
             while_waiting()

@@ -143,3 +143,33 @@ def test_decimate_relocates_after_each_collapse_and_keeps_the_plan():
     check_state(engine, plan.total_cost())
     alive = plan.complex.alive
     assert np.any(plan.complex.positions[alive] != start[alive])
+
+
+@settings(max_examples=100, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(st.integers(0, 2**31 - 1), st.integers(5, 12), st.floats(0.3, 1.0), st.booleans())
+def test_scoring_the_cheapest_only_finds_the_same_cheapest_collapse(seed, n, keep, with_veto):
+    rng = np.random.default_rng(seed)
+    c = delaunay_complex(seed, n, keep)
+    p = points_on(c, rng)
+    plan = SurfacePlan(c, p, rng.uniform(0.5, 2.0, len(p)), BinSettings(np.sqrt(3), min_bins=1, max_bins=4))
+    halves = c.half_edges()
+    if not halves:
+        return
+    targets = {}
+    for s, t in (halves[i] for i in rng.choice(len(halves), min(12, len(halves)), replace=False)):
+        targets.setdefault(s, []).append(t)
+    full = dict(SurfaceEngine(plan, method="exact").score(targets, targets))
+    veto = None
+    if with_veto and full:  # refuse the cheapest: the bound must then beat the second
+        banned = min(full, key=full.get)
+        veto = (lambda cand, scored: (cand.source, cand.target) != banned)
+        full.pop(banned)
+    engine = SurfaceEngine(plan, method="exact")
+    cheap = dict(engine.score(targets, targets, veto=veto, cheapest_only=True))
+    assert bool(cheap) == bool(full)
+    if not full:
+        return
+    assert min(cheap.values()) == pytest.approx(min(full.values()), rel=1e-9, abs=1e-12)
+    for key, delta in cheap.items():
+        assert delta == pytest.approx(full[key], rel=1e-9, abs=1e-12)
+    assert engine.counts["scored"] + engine.counts["pruned"] >= len(full)
