@@ -110,21 +110,39 @@ def inadmissible(complex_: SimplicialComplex, source: int, target: int, degenera
     """
     if not complex_.has_edge(source, target) or source == target:
         return f"there is no edge between {source} and {target}"
-    pos = complex_.positions
+    # Every new image at once: this runs for every candidate drawn, and
+    # per-facet np.cross calls were most of the candidates' building time.
+    facets, images = [], []
     for t in complex_.vertex_triangles[source]:
         img = replace_vertex(t, source, target)
-        if img is None or img in complex_.triangles:
-            continue
-        a, b = (v for v in t if v != source)
-        before = np.cross(pos[a] - pos[source], pos[b] - pos[source])
-        after = np.cross(pos[a] - pos[target], pos[b] - pos[target])
-        longest = max(np.sum((pos[a] - pos[b]) ** 2), np.sum((pos[a] - pos[target]) ** 2),
-                      np.sum((pos[b] - pos[target]) ** 2))
-        if not np.linalg.norm(after) > degenerate * longest:
-            return f"the new facet {img} is degenerate"
-        if not np.dot(before, after) > 0:
-            return f"the facet {t} turns over into {img}"
-    return None
+        if img is not None and img not in complex_.triangles:
+            facets.append(t)
+            images.append(img)
+    if not facets:
+        return None
+    pos = complex_.positions
+    ab = pos[np.array([[v for v in t if v != source] for t in facets])]  # (F, 2, 3)
+    a, b = ab[:, 0], ab[:, 1]
+    before = _cross(a - pos[source], b - pos[source])
+    after = _cross(a - pos[target], b - pos[target])
+    longest = np.max(np.stack([np.sum((a - b) ** 2, 1), np.sum((a - pos[target]) ** 2, 1),
+                               np.sum((b - pos[target]) ** 2, 1)]), axis=0)
+    degenerated = ~(np.sqrt(np.sum(after * after, 1)) > degenerate * longest)
+    turned = ~(np.sum(before * after, 1) > 0)
+    bad = np.flatnonzero(degenerated | turned)
+    if not len(bad):
+        return None
+    k = int(bad[0])
+    if degenerated[k]:
+        return f"the new facet {images[k]} is degenerate"
+    return f"the facet {facets[k]} turns over into {images[k]}"
+
+
+def _cross(u: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """``(F, 3)`` row-wise cross products (``np.cross`` costs more than
+    the arithmetic on a few rows)."""
+    return np.stack([u[:, 1] * v[:, 2] - u[:, 2] * v[:, 1], u[:, 2] * v[:, 0] - u[:, 0] * v[:, 2],
+                     u[:, 0] * v[:, 1] - u[:, 1] * v[:, 0]], axis=1)
 
 
 def new_facet_bins(plan: SurfacePlan, facets, cache: dict | None = None) -> dict:

@@ -17,7 +17,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from otjax.lp.problem import CONVERGED, ITERATION_LIMIT, LocalLP
+from otjax.lp.problem import CONVERGED, ITERATION_LIMIT, LocalLP, lower_bound
 from otjax.surfaces.plan import Stencil, SurfacePlan
 from otjax.surfaces.relaxation import GAIN, Solver
 from otjax.surfaces.relocation import DAMPING, ROUNDS, degenerates, star_corners
@@ -126,6 +126,8 @@ def propose_moves(plan: SurfacePlan, vertices: Sequence[int], solve: Solver, rou
     alternation is kept only if it lowers the star's cost (by more than
     :data:`~otjax.surfaces.relaxation.GAIN` of it) and flattens no facet
     (:func:`~otjax.surfaces.relocation.degenerates`); the first that does not ends the vertex's moves.
+    A move whose LP's lower bound (:func:`~otjax.lp.problem.lower_bound`)
+    already misses that gain is not solved.
     Each round solves the stencils of every vertex still moving in one
     ``solve`` call. Proposals are independent of one another: applying two
     whose closed stars share a vertex is not what visiting them in turn does.
@@ -157,7 +159,10 @@ def propose_moves(plan: SurfacePlan, vertices: Sequence[int], solve: Solver, rou
             new = x + damping * (target - x)
             if np.array_equal(new, x) or degenerates(star_corners(plan, v, x), star_corners(plan, v, new)):
                 continue
-            trials.append((v, new, moved_lp(plan, st, v, new)))
+            lp = moved_lp(plan, st, v, new)
+            if lower_bound(lp) >= state[v][3] * (1.0 - GAIN):
+                continue  # no plan at the new position could be kept: the vertex stops, unsolved
+            trials.append((v, new, lp))
         solved = solve([lp for _, _, lp in trials]) if trials else []
         moving = []
         for (v, new, lp), sol in zip(trials, solved):
