@@ -4,7 +4,7 @@ Points -> canonical frame -> initial complex (Delaunay of a subset, relaxed
 transport, facets with mass; §4.1) -> (re-binned) -> greedy half-edge
 collapses by increase of transport cost (§4.2, the shared loop of
 :mod:`otjax.decimation`), relocating the remaining vertex and its
-neighbours after each (§4.3) -> relocation passes over every vertex ->
+neighbours after each of the last collapses (§4.3) -> relocation passes over every vertex ->
 arrays in the input's units.
 """
 
@@ -35,6 +35,9 @@ SOLVERS = ("batched", "exact")
 REBIN = False
 #: Relaxation sweeps after re-binning.
 REBIN_SWEEPS = 2
+#: Collapses, counted from the end, after which the kept vertex and its
+#: neighbours are relocated (docs/decisions.md#surface_relocation_schedule).
+RELOCATE_LAST = 100
 #: Relocation passes over every vertex after the decimation, at most.
 FINAL_RELOCATIONS = 4
 
@@ -87,7 +90,7 @@ class SurfaceReconstruction(NamedTuple):
 def reconstruct_surface(points, masses=None, n_vertices: int = 100, *, queue: str = "multiple-choice",
                         choices: int = 40, switch_factor: float = 1.0, seed: int = 0, solver: str | None = None,
                         fraction: float = FRACTION, rebin: bool = REBIN, max_sweeps: int = 10,
-                        relocation: int | None = None, final_relocations: int = FINAL_RELOCATIONS,
+                        relocation: int | None = RELOCATE_LAST, final_relocations: int = FINAL_RELOCATIONS,
                         progress: bool = False) -> SurfaceReconstruction:
     """Reconstructs a surface (triangles, plus edges and isolated vertices) from 3D points.
 
@@ -109,9 +112,9 @@ def reconstruct_surface(points, masses=None, n_vertices: int = 100, *, queue: st
       relocation: relocate the vertex a collapse keeps and its neighbours
         (§4.3: alternations of the closed-form target, a move half way
         there, a re-solve of its star; kept where the cost falls) after
-        each of the last ``relocation`` collapses; ``None`` (default):
-        after every collapse, as the paper does; 0: never during the
-        decimation. Without relocation the vertices stay input points.
+        each of the last ``relocation`` collapses (default
+        :data:`RELOCATE_LAST`); ``None``: after every collapse, as the
+        paper does; 0: never during the decimation. Without relocation the vertices stay input points.
       final_relocations: relocation passes over every vertex after the
         decimation (fewer if a pass moves none; 0: none).
       progress: show a progress bar.
