@@ -40,8 +40,8 @@ def assert_one_closed_cycle(result, n: int) -> None:
 
 # The acceptance cases: (points, input size) -> (result(s), truth).
 
-STAR_POINTS = 3000
-SKYLINE_POINTS = 1500
+STAR_POINTS = 2000
+SKYLINE_POINTS = 750
 JUNCTION_POINTS = 2000
 
 

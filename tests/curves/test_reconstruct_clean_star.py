@@ -1,4 +1,4 @@
-"""Acceptance of ``reconstruct_curve`` on a noise-free star (3000 points, 10
+"""Acceptance of ``reconstruct_curve`` on a noise-free star (2000 points, 10
 vertices): its corners are recovered. Distances are relative to the
 bounding-box diagonal ``D``."""
 

@@ -1,4 +1,4 @@
-"""Acceptance of ``reconstruct_curve`` on a noisy skyline (1500 points, σ =
+"""Acceptance of ``reconstruct_curve`` on a noisy skyline (750 points, σ =
 0.5% D, corners and open ends), with and without relocation, in every queue
 configuration.
 

@@ -1,4 +1,4 @@
-"""Acceptance of ``reconstruct_curve`` on a noisy star (3000 points, σ = 1% D,
+"""Acceptance of ``reconstruct_curve`` on a noisy star (2000 points, σ = 1% D,
 10 vertices), in every queue configuration; its JSON output.
 
 Each reconstruction runs once per module, and several tests read it.
