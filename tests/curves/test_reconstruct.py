@@ -14,7 +14,7 @@ import otjax
 from otjax import datasets, metrics
 
 
-def small_case(seed=0, n=400):
+def small_case(seed=0, n=200):
     pts, _ = datasets.star(n, noise=0.01, seed=seed)
     return pts
 
