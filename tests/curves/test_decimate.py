@@ -121,7 +121,7 @@ def test_prefetching_the_next_draw_changes_nothing_but_the_caches():
 
 
 def test_multiple_choice_scores_far_fewer_candidates():
-    pts, _ = otjax.datasets.star(1500, noise=0.01, seed=9)
+    pts, _ = otjax.datasets.star(600, noise=0.01, seed=9)
     mc = otjax.reconstruct_curve(pts, n_vertices=10, queue="multiple-choice", relocation=0)
     ex = otjax.reconstruct_curve(pts, n_vertices=10, queue="exhaustive", relocation=0)
     assert mc.history["switched_at"] == 50
@@ -134,10 +134,10 @@ def test_multiple_choice_scores_far_fewer_candidates():
 
 
 def test_same_seed_same_multiple_choice_result_and_seed_matters():
-    pts, _ = otjax.datasets.star(800, noise=0.01, seed=10)
-    a = otjax.reconstruct_curve(pts, n_vertices=10, queue="multiple-choice", initial_vertices=400, seed=3)
-    b = otjax.reconstruct_curve(pts, n_vertices=10, queue="multiple-choice", initial_vertices=400, seed=3)
-    c = otjax.reconstruct_curve(pts, n_vertices=10, queue="multiple-choice", initial_vertices=400, seed=4)
+    pts, _ = otjax.datasets.star(400, noise=0.01, seed=10)
+    a = otjax.reconstruct_curve(pts, n_vertices=10, queue="multiple-choice", initial_vertices=200, seed=3)
+    b = otjax.reconstruct_curve(pts, n_vertices=10, queue="multiple-choice", initial_vertices=200, seed=3)
+    c = otjax.reconstruct_curve(pts, n_vertices=10, queue="multiple-choice", initial_vertices=200, seed=4)
     np.testing.assert_array_equal(a.vertices, b.vertices)
     np.testing.assert_array_equal(a.edges, b.edges)
     assert a.total_cost == b.total_cost
