@@ -48,7 +48,7 @@ def test_link_updates_make_the_same_greedy_as_full_rescoring(queue, n, seed, sub
 @pytest.mark.parametrize("seed", [12, 13])
 def test_each_link_update_equals_a_full_scoring(seed):
     rng = np.random.default_rng(seed)
-    pts = noisy_shape(rng, 500)
+    pts = noisy_shape(rng, 200)
     mass = rng.uniform(0.5, 2.0, len(pts))
     engine = CurveEngine(Triangulation(pts[::2]), pts, mass, update_min_rows=0)
     tri = engine.plan.tri
