@@ -26,7 +26,7 @@ from otjax.curves.decimate import QUEUES
 from otjax.curves.reconstruct import EXHAUSTIVE_COLLAPSES, reconstruct_curve
 from otjax.curves.result import SAVE_EXTENSIONS
 from otjax.io import IMAGE_EXTENSIONS, TEXT_EXTENSIONS, check_output_paths, read_points, write_files
-from otjax.validation import check_points, check_target
+from otjax.validation import MAX_POINTS, check_points, check_target
 
 
 def _curve_parser(sub) -> argparse.ArgumentParser:
@@ -129,8 +129,8 @@ def _load(args, usage) -> tuple:
         if args.example not in datasets.EXAMPLES:
             raise ValueError(f"unknown example {args.example!r}; choose from {', '.join(datasets.EXAMPLES)}")
         extra = {} if args.points is None else {"n": args.points}
-        if args.points is not None and args.points < 3:
-            raise ValueError(f"--points must be at least 3, got {args.points}")
+        if args.points is not None and not 3 <= args.points <= MAX_POINTS:
+            raise ValueError(f"--points must be between 3 and {MAX_POINTS}, got {args.points}")
         points, masses, _, defaults = datasets.load_example(
             args.example, seed=0 if args.seed is None else args.seed, **extra
         )

@@ -18,7 +18,7 @@ from otjax.io3d import read_mesh, read_points3d
 from otjax.surfaces.features import recover_features
 from otjax.surfaces.reconstruct import reconstruct_surface, surface_solver
 from otjax.surfaces.result import SAVE_EXTENSIONS
-from otjax.validation import check_number
+from otjax.validation import MAX_POINTS, check_number
 
 #: Points and vertices of a built-in example unless --points / -n say otherwise.
 EXAMPLE_POINTS = 2000
@@ -76,6 +76,8 @@ def add_surface_parsers(sub) -> None:
 def _example_size(args) -> int:
     n = EXAMPLE_POINTS if args.points is None else args.points
     check_number("--points", n, minimum=100, integer=True)
+    if n > MAX_POINTS:
+        raise ValueError(f"--points must be at most {MAX_POINTS}, got {n}")
     check_number("--noise", args.noise)
     return n
 

@@ -518,3 +518,11 @@ def test_compile_cache_is_written_then_reused_with_the_same_result(tmp_path):
     third = _cli(args + ["--no-compile-cache"], env)
     assert third.returncode == 0, third.stderr
     assert not (tmp_path / "other").exists()
+
+
+@pytest.mark.parametrize("points", ["2", "2147483648", "10000000000000000000000"])
+def test_example_sizes_out_of_range_are_one_line_errors(fake, capsys, points):
+    assert main(["curve", "--example", "ring", "--points", points, "--quiet"]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--points must be between 3 and" in err[0] and points in err[0]
+    assert fake.example_calls == [] and fake.calls == []
