@@ -17,9 +17,10 @@ simplices leaves every other entry of the plan as it was. Hence::
 
 is the change of the global cost when the solved plan is applied.
 
-Every candidate's LP is solved together (:func:`solve_all`): batches of a
-fixed size and a few padded shapes for the JAX solver, HiGHS for small
-groups and for the members it does not certify (or for all, ``method="exact"``).
+Every candidate's LP is solved together
+(:func:`otjax.lp.solve.solve_members`): batches of a fixed size and a few
+padded shapes for the JAX solver, HiGHS for small groups and for the members
+it does not certify (or for all, ``method="exact"``).
 """
 
 from __future__ import annotations
@@ -30,13 +31,11 @@ from typing import NamedTuple
 import numpy as np
 
 from otjax.lp.batched import NewtonOptions
-from otjax.lp.exact import MemberSolution
 from otjax.lp.problem import CONVERGED, ITERATION_LIMIT, LocalLP
-from otjax.lp.solve import solve_members
+from otjax.lp.solve import MembersResult, solve_members
 from otjax.surfaces.complex import SimplicialComplex, Triangle, replace_vertex
 from otjax.surfaces.plan import Stencil, SurfacePlan
 
-METHODS = ("auto", "exact")
 #: A new facet whose ``2 area / longest edge^2`` (about the sine of its
 #: smallest angle) is below this is degenerate: its bins' barycentric
 #: coordinates would be ill-conditioned, and a flat facet has none.
@@ -79,15 +78,6 @@ class ScoredCollapse(NamedTuple):
     cost: float
     plan: np.ndarray
     status: int
-
-
-class Solved(NamedTuple):
-    """What :func:`solve_all` returns: one solution per problem, HiGHS
-    re-solves of uncertified members, and the JAX solver calls made."""
-
-    solutions: list[MemberSolution]
-    exact_resolves: int
-    kernel_calls: int
 
 
 def inadmissible(complex_: SimplicialComplex, source: int, target: int, degenerate: float = DEGENERATE) -> str | None:
@@ -199,21 +189,12 @@ def build_candidates(plan: SurfacePlan, half_edges, bin_cache: dict | None = Non
     return out
 
 
-def solve_all(problems: Sequence[LocalLP], method: str = "auto", options: NewtonOptions = NewtonOptions()) -> Solved:
-    """Solves every problem by :func:`otjax.lp.solve.solve_members` (closed
-    forms first, then padded batches of a few shapes, HiGHS for small groups
-    and for the members the batched solver did not certify; ``"exact"``:
-    HiGHS for all). Needs JAX's x64 mode for ``"auto"``.
-    """
-    got = solve_members(problems, method, options)
-    return Solved(got.solutions, got.exact_resolves, got.batched_calls)
-
-
 def score_candidates(candidates: Sequence[CollapseCandidate], method: str = "auto",
-                     options: NewtonOptions = NewtonOptions()) -> tuple[list[ScoredCollapse | None], Solved]:
-    """Solves every candidate's LP in one :func:`solve_all`; a candidate
-    whose solution is not usable (infeasible, failed) scores ``None``."""
-    solved = solve_all([c.stencil.lp for c in candidates], method, options)
+                     options: NewtonOptions = NewtonOptions()) -> tuple[list[ScoredCollapse | None], MembersResult]:
+    """Solves every candidate's LP in one :func:`~otjax.lp.solve.solve_members`
+    (``method``: ``"auto"`` or ``"exact"``); a candidate whose solution is not
+    usable (infeasible, failed) scores ``None``."""
+    solved = solve_members([c.stencil.lp for c in candidates], method, options)
     out: list[ScoredCollapse | None] = []
     for cand, sol in zip(candidates, solved.solutions):
         if sol.status not in (CONVERGED, ITERATION_LIMIT):

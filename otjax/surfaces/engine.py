@@ -210,7 +210,7 @@ class SurfaceEngine:
         self.counts["scored"] += len(cands)
         self.counts["refused"] += sum(s is None for s in scored)
         self.counts["exact_resolves"] += solved.exact_resolves
-        self.counts["kernel_calls"] += solved.kernel_calls
+        self.counts["kernel_calls"] += solved.batched_calls
         self.sizes.extend(c.stencil.lp.cost.shape for c in cands)
         return scored
 
