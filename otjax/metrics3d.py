@@ -324,8 +324,8 @@ def edge_sharpness(vertices, triangles) -> EdgeSharpness:
     dd = np.einsum("nd,nd->n", d, d)
     w = w - (np.einsum("nd,nd->n", w, d) / np.where(dd > 0, dd, 1.0))[:, None] * d  # across the edge
     ok = np.linalg.norm(w, axis=1) > 0
-    new = np.r_[True, np.any(rows[1:, :2] != rows[:-1, :2], axis=1)]
-    start = np.flatnonzero(new)
+    new = np.r_[len(rows) > 0, np.any(rows[1:, :2] != rows[:-1, :2], axis=1)]
+    start = np.flatnonzero(new[:len(rows)])
     count = np.diff(np.r_[start, len(rows)])
     angle = np.zeros(len(start))
     for e in np.flatnonzero(count > 1):

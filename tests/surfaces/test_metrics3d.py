@@ -212,6 +212,17 @@ def test_boundary_error():
     assert err.max == pytest.approx(0.35)  # the hole's corners, from the outer border
 
 
+def test_no_triangles_have_no_sharp_or_boundary_edge():
+    """A result reduced to vertices and dangling edges: no edge has an angle,
+    so every true crease and boundary is infinitely far (not an IndexError)."""
+    truth = datasets3d.staircase_truth()
+    v = truth.corners
+    none = np.zeros((0, 3), np.int64)
+    assert metrics3d.edge_sharpness(v, none).edges.shape == (0, 2)
+    assert metrics3d.crease_error(v, none, truth.creases).mean == np.inf
+    assert metrics3d.boundary_error(v, none, truth.boundaries).max == np.inf
+
+
 def test_bad_input_is_a_value_error():
     with pytest.raises(ValueError, match="triangles index out of range"):
         metrics3d.triangle_samples(np.eye(3), [[0, 1, 3]], 0.1)
