@@ -15,6 +15,7 @@ import argparse
 from otjax import datasets3d
 from otjax.io import check_output_paths, write_files
 from otjax.io3d import read_mesh, read_points3d
+from otjax.surfaces.bins import DEFAULT_DENSITY
 from otjax.surfaces.features import recover_features
 from otjax.surfaces.reconstruct import reconstruct_surface, surface_solver
 from otjax.surfaces.result import SAVE_EXTENSIONS
@@ -56,6 +57,9 @@ def add_surface_parsers(sub) -> None:
                    help=f"target number of vertices (required for files; examples: {EXAMPLE_VERTICES})")
     p.add_argument("--queue", choices=("multiple-choice", "exhaustive", "parallel"), default="multiple-choice",
                    help="collapse order (default: multiple-choice, 40 half-edges a step)")
+    p.add_argument("--bin-density", type=float, default=DEFAULT_DENSITY, metavar="B",
+                   help=f"facet bins per squared bounding-box diagonal of area ({DEFAULT_DENSITY:g}); higher: "
+                   "finer cost, sharper creases at small -n, slower")
     _outputs(p)
     p.set_defaults(run=_run_surface, usage=p.error)
 
@@ -98,9 +102,10 @@ def _run_surface(args, usage) -> int:
         points, masses = read_points3d(args.input)
     n_vertices = EXAMPLE_VERTICES if args.n_vertices is None else args.n_vertices
     solver = surface_solver(args.solver)
-    params = {"n_vertices": n_vertices, "queue": args.queue, "seed": args.seed, "solver": solver}
+    params = {"n_vertices": n_vertices, "queue": args.queue, "seed": args.seed, "solver": solver,
+              "bin_density": args.bin_density}
     run = reconstruct_surface(points, masses, n_vertices, queue=args.queue, seed=args.seed, solver=solver,
-                              progress=not args.quiet)
+                              bin_density=args.bin_density, progress=not args.quiet)
     result = run.to_result(params)
     return _finish(result, args, outputs)
 

@@ -158,13 +158,14 @@ def initial_complex(points: np.ndarray, masses: np.ndarray, solve: Solver, *, fr
     return InitialComplex(kept[0], kept[1], len(facets), stats, seconds)
 
 
-def initial_settings(points: np.ndarray, seed: int = 0) -> BinSettings:
-    """The bin settings of the initial relaxation: the input's diagonal, the
-    default density, at least :data:`MIN_BINS` bins on a facet and one per
-    :data:`BIN_LENGTH` of its longest edge, and every facet's bins mapped from
-    the template (:data:`MAX_STRETCH`)."""
-    return BinSettings(diagonal=float(np.linalg.norm(np.ptp(points, axis=0))), min_bins=MIN_BINS, seed=seed,
-                       max_stretch=MAX_STRETCH, bin_length=BIN_LENGTH)
+def initial_settings(points: np.ndarray, seed: int = 0, density: float = DEFAULT_DENSITY) -> BinSettings:
+    """The bin settings of the initial relaxation (and of the facets the
+    decimation makes): the input's diagonal, ``density`` bins per squared
+    diagonal of facet area, at least :data:`MIN_BINS` bins on a facet and one
+    per :data:`BIN_LENGTH` of its longest edge, and every facet's bins mapped
+    from the template (:data:`MAX_STRETCH`)."""
+    return BinSettings(diagonal=float(np.linalg.norm(np.ptp(points, axis=0))), density=density,
+                       min_bins=MIN_BINS, seed=seed, max_stretch=MAX_STRETCH, bin_length=BIN_LENGTH)
 
 
 def _kept(plan: SurfacePlan, vertices: np.ndarray, subset: np.ndarray) -> tuple[SurfacePlan, np.ndarray]:

@@ -19,10 +19,10 @@ import numpy as np
 from otjax.decimation.loop import QUEUES, DecimationStats, decimate
 from otjax.decimation.relocation import relocate
 from otjax.frame import to_canonical
-from otjax.surfaces.bins import facet_areas
+from otjax.surfaces.bins import DEFAULT_DENSITY, facet_areas
 from otjax.surfaces.complex import SimplicialComplex
 from otjax.surfaces.engine import SurfaceEngine
-from otjax.surfaces.initial_complex import FRACTION, initial_complex
+from otjax.surfaces.initial_complex import FRACTION, initial_complex, initial_settings
 from otjax.surfaces.plan import BinSettings, Entries, SurfacePlan
 from otjax.surfaces.relaxation import relax
 from otjax.surfaces.result import SurfaceResult
@@ -89,7 +89,8 @@ class SurfaceReconstruction(NamedTuple):
 
 def reconstruct_surface(points, masses=None, n_vertices: int = 100, *, queue: str = "multiple-choice",
                         choices: int = 40, switch_factor: float = 1.0, seed: int = 0, solver: str | None = None,
-                        fraction: float = FRACTION, rebin: bool = REBIN, max_sweeps: int = 10,
+                        fraction: float = FRACTION, bin_density: float = DEFAULT_DENSITY, rebin: bool = REBIN,
+                        max_sweeps: int = 10,
                         relocation: int | None = RELOCATE_LAST, final_relocations: int = FINAL_RELOCATIONS,
                         progress: bool = False) -> SurfaceReconstruction:
     """Reconstructs a surface (triangles, plus edges and isolated vertices) from 3D points.
@@ -107,6 +108,11 @@ def reconstruct_surface(points, masses=None, n_vertices: int = 100, *, queue: st
         certify) or ``"exact"`` (HiGHS for every local LP); ``None``
         (default): :func:`surface_solver`, HiGHS on a CPU.
       fraction: share of the points in the initial Delaunay (§4.1).
+      bin_density: facet bins per squared bounding-box diagonal of facet
+        area (the paper's quadrature parameter; between 1 and 32 bins a
+        facet whatever its area). Higher is a finer quadrature of the cost:
+        sharper creases at small vertex budgets, where facets are large,
+        for larger local LPs (docs/benchmarks.md, "Surfaces: reconstruction").
       rebin: give every facet the default bins before decimating.
       max_sweeps: relaxation sweeps of the initial complex at most.
       relocation: relocate the vertex a collapse keeps and its neighbours
@@ -133,6 +139,9 @@ def reconstruct_surface(points, masses=None, n_vertices: int = 100, *, queue: st
     t0 = time.perf_counter()
     solver = surface_solver(solver)
     points, masses = _checked(points, masses, n_vertices, queue, choices, switch_factor, solver, fraction)
+    bin_density = check_number("bin_density", bin_density)
+    if not bin_density > 0:
+        raise ValueError(f"bin_density must be > 0, got {bin_density}")
     seed = check_number("seed", seed, integer=True)
     relocation = check_number("relocation", relocation, minimum=0, integer=True, allow_none=True)
     final_relocations = check_number("final_relocations", final_relocations, minimum=0, integer=True)
@@ -142,7 +151,8 @@ def reconstruct_surface(points, masses=None, n_vertices: int = 100, *, queue: st
     method = "auto" if solver == "batched" else "exact"
     seconds = {}
     with jax.enable_x64(True):
-        init = initial_complex(q, m, LocalSolver(method), fraction=fraction, seed=seed, max_sweeps=max_sweeps)
+        init = initial_complex(q, m, LocalSolver(method), fraction=fraction, seed=seed, max_sweeps=max_sweeps,
+                               settings=initial_settings(q, seed, bin_density))
         seconds["initial"] = time.perf_counter() - t0
         plan = init.plan
         if plan.complex.n_vertices < n_vertices:
@@ -150,7 +160,8 @@ def reconstruct_surface(points, masses=None, n_vertices: int = 100, *, queue: st
                              "initial complex; lower it or raise fraction")
         t1 = time.perf_counter()
         if rebin:
-            plan = rebinned(plan, BinSettings(plan.settings.diagonal, seed=seed), LocalSolver(method))
+            plan = rebinned(plan, BinSettings(plan.settings.diagonal, density=bin_density, seed=seed),
+                            LocalSolver(method))
         seconds["rebin"] = time.perf_counter() - t1
         engine = SurfaceEngine(plan, method=method)
         t2 = time.perf_counter()

@@ -60,6 +60,17 @@ def test_results_are_in_user_units():
     assert r.total_cost > 0
 
 
+def test_bin_density_sets_the_bins_of_large_facets():
+    """Four times the density: facets of the same area get about four times
+    the bins (each facet's count is that of its area when it was made, between 1 and 32)."""
+    kw = {"n_vertices": 8, "fraction": 0.2, "relocation": 0, "final_relocations": 0}
+    pts, coarse = run(SQUARE, 150, seed=4, **kw)
+    _, fine = run(SQUARE, 150, seed=4, bin_density=600.0, **kw)
+    bins = lambda r: np.array([len(r.plan.bins[t].capacity) for t in r.plan.facet_entries])  # noqa: E731
+    assert fine.plan.settings.density == 4 * coarse.plan.settings.density == 600
+    assert bins(fine).sum() > 2 * bins(coarse).sum()
+
+
 @pytest.mark.parametrize("kw, match", [
     ({"points": np.zeros((10, 2))}, "shape"),
     ({"points": np.r_[np.random.default_rng(0).random((9, 3)), [[np.nan, 0, 0]]]}, "NaN"),
@@ -69,6 +80,8 @@ def test_results_are_in_user_units():
     ({"n_vertices": 11}, "cannot exceed"),
     ({"solver": "fast"}, "solver"),
     ({"queue": "lifo"}, "queue"),
+    ({"bin_density": 0.0}, "bin_density must be > 0"),
+    ({"bin_density": float("nan")}, "bin_density"),
 ])
 def test_bad_input_is_one_clear_value_error(kw, match):
     args = {"points": np.random.default_rng(0).random((10, 3)), "masses": None, "n_vertices": 5, **kw}
