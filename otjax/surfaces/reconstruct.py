@@ -108,11 +108,9 @@ def reconstruct_surface(points, masses=None, n_vertices: int = 100, *, queue: st
         certify) or ``"exact"`` (HiGHS for every local LP); ``None``
         (default): :func:`surface_solver`, HiGHS on a CPU.
       fraction: share of the points in the initial Delaunay (§4.1).
-      bin_density: facet bins per squared bounding-box diagonal of facet
-        area (the paper's quadrature parameter; between 1 and 32 bins a
-        facet whatever its area). Higher is a finer quadrature of the cost:
-        sharper creases at small vertex budgets, where facets are large,
-        for larger local LPs (docs/benchmarks.md, "Surfaces: reconstruction").
+      bin_density: facet bins per squared bbox diagonal of facet area (the
+        paper's quadrature; 1 to 32 bins a facet). Higher: a finer cost and
+        sharper creases at small budgets, larger LPs (docs/benchmarks.md).
       rebin: give every facet the default bins before decimating.
       max_sweeps: relaxation sweeps of the initial complex at most.
       relocation: relocate the vertex a collapse keeps and its neighbours
@@ -138,15 +136,11 @@ def reconstruct_surface(points, masses=None, n_vertices: int = 100, *, queue: st
     """
     t0 = time.perf_counter()
     solver = surface_solver(solver)
-    points, masses = _checked(points, masses, n_vertices, queue, choices, switch_factor, solver, fraction)
-    bin_density = check_number("bin_density", bin_density)
-    if not bin_density > 0:
-        raise ValueError(f"bin_density must be > 0, got {bin_density}")
+    points, masses = _checked(points, masses, n_vertices, queue, choices, switch_factor, solver, fraction,
+                              bin_density)
     seed = check_number("seed", seed, integer=True)
     relocation = check_number("relocation", relocation, minimum=0, integer=True, allow_none=True)
     final_relocations = check_number("final_relocations", final_relocations, minimum=0, integer=True)
-    if masses is not None and np.any(masses <= 0):
-        raise ValueError(f"masses must be > 0: {int(np.sum(masses <= 0))} are not")
     frame, q, m = to_canonical(points, masses)
     method = "auto" if solver == "batched" else "exact"
     seconds = {}
@@ -170,13 +164,21 @@ def reconstruct_surface(points, masses=None, n_vertices: int = 100, *, queue: st
                          relocation=every if relocation is None else relocation, progress=progress)
         seconds["decimation"] = time.perf_counter() - t2
         t3 = time.perf_counter()
-        for _ in range(final_relocations):
-            moved = relocate(engine, engine.live_sources())[1]
-            stats.relocations += moved
-            if moved == 0:
-                break
+        stats.relocations += _final_passes(engine, final_relocations)
         seconds["final_relocation"] = time.perf_counter() - t3
     return _result(plan, frame, stats, seconds)
+
+
+def _final_passes(engine: SurfaceEngine, passes: int) -> int:
+    """Relocation passes over every live vertex, at most ``passes``, until
+    one moves none; the number of moves."""
+    total = 0
+    for _ in range(passes):
+        moved = relocate(engine, engine.live_sources())[1]
+        total += moved
+        if moved == 0:
+            break
+    return total
 
 
 def surface_solver(solver: str | None) -> str:
@@ -188,9 +190,13 @@ def surface_solver(solver: str | None) -> str:
     return "exact" if default_solver() == "exact" else "batched"
 
 
-def _checked(points, masses, n_vertices, queue, choices, switch_factor, solver, fraction):
+def _checked(points, masses, n_vertices, queue, choices, switch_factor, solver, fraction, bin_density):
     """Validated ``(points, masses)``; raises on bad parameters."""
     points, masses = check_points(points, masses, dim=3, min_points=4)
+    if masses is not None and np.any(masses <= 0):
+        raise ValueError(f"masses must be > 0: {int(np.sum(masses <= 0))} are not")
+    if not check_number("bin_density", bin_density) > 0:
+        raise ValueError(f"bin_density must be > 0, got {bin_density}")
     check_target(n_vertices, len(points), minimum=4)
     if queue not in QUEUES:
         raise ValueError(f"queue must be one of {', '.join(QUEUES)}, got {queue!r}")
