@@ -106,13 +106,14 @@ def generate(kind: Kind, n: int, seed: int):
                                              seed=seed)
 
 
-def run_otjax(points: np.ndarray, n_vertices: int, threshold: float, seed: int) -> Output:
-    """:func:`otjax.surfaces.reconstruct_surface` at its defaults, then
-    facets below ``threshold`` times the mean density dropped."""
+def run_otjax(points: np.ndarray, n_vertices: int, threshold: float, seed: int, bin_density: float | None) -> Output:
+    """:func:`otjax.surfaces.reconstruct_surface` at its defaults (or with
+    ``bin_density``), then facets below ``threshold`` times the mean density dropped."""
     from otjax.surfaces import reconstruct_surface
 
     t0 = time.perf_counter()
-    run = reconstruct_surface(points, n_vertices=n_vertices, seed=seed)
+    extra = {} if bin_density is None else {"bin_density": bin_density}
+    run = reconstruct_surface(points, n_vertices=n_vertices, seed=seed, **extra)
     result = run.to_result().filtered(threshold)
     seconds = time.perf_counter() - t0
     note = (f"{len(run.triangles)} -> {len(result.triangles)} facets at density {threshold:g}; "
@@ -262,6 +263,7 @@ def parse(argv=None) -> argparse.Namespace:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--density-threshold", type=float, default=0.1,
                    help="otjax: drop facets below this multiple of the mean density (0: keep all with mass)")
+    p.add_argument("--bin-density", type=float, help="otjax: facet bins per squared diagonal (default: its own)")
     p.add_argument("--depth", type=int, default=8, help="Poisson octree depth")
     p.add_argument("--trim", type=float, default=3.0,
                    help="Poisson: drop vertices farther than this many point spacings from the input (0: keep all)")
@@ -293,7 +295,7 @@ def main(argv=None) -> int:
         outputs, by_method = {}, {}
         for method in args.methods:
             if method == "otjax":
-                out = run_otjax(points, args.vertices, args.density_threshold, args.seed)
+                out = run_otjax(points, args.vertices, args.density_threshold, args.seed, args.bin_density)
             else:
                 out = run_poisson(o3d, pymeshlab, points, args.vertices, args.depth, args.trim, args.neighbours)
             outputs[method] = out
