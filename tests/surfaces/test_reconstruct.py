@@ -1,5 +1,7 @@
 """reconstruct_surface end to end on shapes with a known surface (small, HiGHS)."""
 
+import json
+
 import numpy as np
 import pytest
 
@@ -58,6 +60,24 @@ def test_results_are_in_user_units():
     np.testing.assert_allclose(r2.triangle_area, r.triangle_area * scale**2, rtol=1e-12)
     np.testing.assert_allclose(r2.triangle_mass, r.triangle_mass, rtol=1e-12)
     assert r.total_cost > 0
+
+
+def test_same_seed_writes_the_same_bytes_and_another_seed_differs(tmp_path):
+    pts = SQUARE.sample(150, np.random.default_rng(4))
+    kw = {"n_vertices": 8, "solver": "exact", "choices": 10, "max_sweeps": 1, "fraction": 0.2}
+    meshes = ("r.ply", "r.obj", "r.off")
+    for run_dir, seed in (("a", 3), ("b", 3), ("c", 4)):
+        result = reconstruct_surface(pts, seed=seed, **kw).to_result({"seed": seed})
+        (tmp_path / run_dir).mkdir()
+        for name in meshes + ("r.json",):
+            result.save(tmp_path / run_dir / name)
+    for name in meshes:
+        assert (tmp_path / "a" / name).read_bytes() == (tmp_path / "b" / name).read_bytes()
+    # The JSON records the wall time, the one field that may differ.
+    ja, jb = (json.loads((tmp_path / d / "r.json").read_text()) for d in "ab")
+    assert ja.pop("seconds") > 0 and jb.pop("seconds") > 0
+    assert json.dumps(ja) == json.dumps(jb)
+    assert (tmp_path / "a" / "r.ply").read_bytes() != (tmp_path / "c" / "r.ply").read_bytes()
 
 
 def test_bin_density_sets_the_bins_of_large_facets():
