@@ -84,7 +84,7 @@ def test_bin_density_sets_the_bins_of_large_facets():
     """Four times the density: facets of the same area get about four times
     the bins (each facet's count is that of its area when it was made, between 1 and 32)."""
     kw = {"n_vertices": 8, "fraction": 0.2, "relocation": 0, "final_relocations": 0}
-    pts, coarse = run(SQUARE, 150, seed=4, **kw)
+    _, coarse = run(SQUARE, 150, seed=4, **kw)
     _, fine = run(SQUARE, 150, seed=4, bin_density=600.0, **kw)
     bins = lambda r: np.array([len(r.plan.bins[t].capacity) for t in r.plan.facet_entries])  # noqa: E731
     assert fine.plan.settings.density == 4 * coarse.plan.settings.density == 600
