@@ -17,7 +17,7 @@ from otjax.io import check_output_paths, write_files
 from otjax.io3d import read_mesh, read_points3d
 from otjax.surfaces.bins import DEFAULT_DENSITY
 from otjax.surfaces.features import recover_features
-from otjax.surfaces.reconstruct import reconstruct_surface, surface_solver
+from otjax.surfaces.reconstruct import FINAL_DENSITY_FACTOR, reconstruct_surface, surface_solver
 from otjax.surfaces.result import SAVE_EXTENSIONS
 from otjax.validation import MAX_POINTS, check_number
 
@@ -60,6 +60,9 @@ def add_surface_parsers(sub) -> None:
     p.add_argument("--bin-density", type=float, default=DEFAULT_DENSITY, metavar="B",
                    help=f"facet bins per squared bounding-box diagonal of area ({DEFAULT_DENSITY:g}); higher: "
                    "finer cost, sharper creases at small -n, slower")
+    p.add_argument("--final-density-factor", type=float, default=FINAL_DENSITY_FACTOR, metavar="F",
+                   help=f"the final relocation passes re-bin the facets at F times B ({FINAL_DENSITY_FACTOR:g}; "
+                   "1: keep the decimation's bins)")
     _outputs(p)
     p.set_defaults(run=_run_surface, usage=p.error)
 
@@ -103,9 +106,10 @@ def _run_surface(args, usage) -> int:
     n_vertices = EXAMPLE_VERTICES if args.n_vertices is None else args.n_vertices
     solver = surface_solver(args.solver)
     params = {"n_vertices": n_vertices, "queue": args.queue, "seed": args.seed, "solver": solver,
-              "bin_density": args.bin_density}
+              "bin_density": args.bin_density, "final_density_factor": args.final_density_factor}
     run = reconstruct_surface(points, masses, n_vertices, queue=args.queue, seed=args.seed, solver=solver,
-                              bin_density=args.bin_density, progress=not args.quiet)
+                              bin_density=args.bin_density, final_density_factor=args.final_density_factor,
+                              progress=not args.quiet)
     result = run.to_result(params)
     return _finish(result, args, outputs)
 

@@ -48,6 +48,8 @@ def files(tmp_path):
     (["surface", "{d}/pts.xyz", "-n", "100000"], "n_vertices"),
     (["surface", "--example", "cube", "--points", "10"], "--points"),
     (["surface", "{d}/pts.xyz", "-n", "8", "-o", "{d}/a.ply", "--bin-density", "0"], "bin_density"),
+    (["surface", "{d}/pts.xyz", "-n", "8", "-o", "{d}/a.ply", "--final-density-factor", "0.5"],
+     "final_density_factor"),
     (["recover", "{d}/pts.xyz", "{d}/empty.off"], "face"),
     (["recover", "{d}/pts.xyz", "{d}/far.off", "-o", "{d}/r.ply"], "far from the mesh"),
     (["recover", "{d}/pts.xyz", "{d}/big.off", "-o", "{d}/r.ply"], "different scales"),
@@ -66,7 +68,7 @@ def test_surface_example_writes_files_that_read_back(tmp_path, capsys):
     assert main(argv + ["-o", str(tmp_path / "a.json"), "-o", str(tmp_path / "a.ply")]) == 0
     data = json.loads((tmp_path / "a.json").read_text())
     jsonschema.validate(data, json_schema())
-    assert data["params"]["bin_density"] == 150
+    assert data["params"]["bin_density"] == 150 and data["params"]["final_density_factor"] == 4
     result = SurfaceResult.from_dict(data)
     assert len(result.vertices) >= 10 and 0 < result.triangle_mass.sum() <= 100 * (1 + 1e-9)
     mesh = read_mesh(tmp_path / "a.ply")

@@ -4,7 +4,8 @@ Points -> canonical frame -> initial complex (Delaunay of a subset, relaxed
 transport, facets with mass; §4.1) -> (re-binned) -> greedy half-edge
 collapses by increase of transport cost (§4.2, the shared loop of
 :mod:`otjax.decimation`), relocating the remaining vertex and its
-neighbours after each of the last collapses (§4.3) -> relocation passes over every vertex ->
+neighbours after each of the last collapses (§4.3) -> the final complex
+re-binned at a finer quadrature -> relocation passes over every vertex ->
 arrays in the input's units.
 """
 
@@ -40,6 +41,9 @@ REBIN_SWEEPS = 2
 RELOCATE_LAST = 100
 #: Relocation passes over every vertex after the decimation, at most.
 FINAL_RELOCATIONS = 4
+#: The final passes' bin density, in multiples of the decimation's
+#: (docs/decisions.md#final_density).
+FINAL_DENSITY_FACTOR = 4.0
 
 
 class SurfaceReconstruction(NamedTuple):
@@ -61,7 +65,7 @@ class SurfaceReconstruction(NamedTuple):
       stats: the :class:`DecimationStats` (``relocations``: moves
         applied during the decimation and in the final passes).
       seconds: wall time of ``initial``, ``rebin``, ``decimation``,
-        ``final_relocation``.
+        ``final_rebin``, ``final_relocation``.
     """
 
     vertices: np.ndarray
@@ -92,6 +96,7 @@ def reconstruct_surface(points, masses=None, n_vertices: int = 100, *, queue: st
                         fraction: float = FRACTION, bin_density: float = DEFAULT_DENSITY, rebin: bool = REBIN,
                         max_sweeps: int = 10,
                         relocation: int | None = RELOCATE_LAST, final_relocations: int = FINAL_RELOCATIONS,
+                        final_density_factor: float = FINAL_DENSITY_FACTOR,
                         progress: bool = False) -> SurfaceReconstruction:
     """Reconstructs a surface (triangles, plus edges and isolated vertices) from 3D points.
 
@@ -121,6 +126,11 @@ def reconstruct_surface(points, masses=None, n_vertices: int = 100, *, queue: st
         paper does; 0: never during the decimation. Without relocation the vertices stay input points.
       final_relocations: relocation passes over every vertex after the
         decimation (fewer if a pass moves none; 0: none).
+      final_density_factor: before those passes the facets get new bins,
+        this many times ``bin_density``, and the transport is relaxed on
+        them (the result's cost is on these bins; 1: keep the decimation's):
+        the few facets left can afford a finer quadrature, which sharpens
+        creases and corners (docs/decisions.md#final_density).
       progress: show a progress bar.
 
     Returns:
@@ -134,39 +144,67 @@ def reconstruct_surface(points, masses=None, n_vertices: int = 100, *, queue: st
       >>> pts = np.random.default_rng(0).random((300, 3)) * [1, 1, 0]  # doctest: +SKIP
       >>> r = reconstruct_surface(pts, n_vertices=10, solver="exact")  # doctest: +SKIP
     """
-    t0 = time.perf_counter()
+    seconds = Laps()
     solver = surface_solver(solver)
     points, masses = _checked(points, masses, n_vertices, queue, choices, switch_factor, solver, fraction,
                               bin_density)
+    final_density_factor = check_number("final_density_factor", final_density_factor, minimum=1.0)
     seed = check_number("seed", seed, integer=True)
     relocation = check_number("relocation", relocation, minimum=0, integer=True, allow_none=True)
     final_relocations = check_number("final_relocations", final_relocations, minimum=0, integer=True)
     frame, q, m = to_canonical(points, masses)
     method = "auto" if solver == "batched" else "exact"
-    seconds = {}
     with jax.enable_x64(True):
-        init = initial_complex(q, m, LocalSolver(method), fraction=fraction, seed=seed, max_sweeps=max_sweeps,
-                               settings=initial_settings(q, seed, bin_density))
-        seconds["initial"] = time.perf_counter() - t0
-        plan = init.plan
-        if plan.complex.n_vertices < n_vertices:
-            raise ValueError(f"n_vertices ({n_vertices}) exceeds the {plan.complex.n_vertices} vertices of the "
-                             "initial complex; lower it or raise fraction")
-        t1 = time.perf_counter()
+        plan = _initial_plan(q, m, method, fraction, seed, max_sweeps, bin_density, n_vertices)
+        seconds.lap("initial")
         if rebin:
             plan = rebinned(plan, BinSettings(plan.settings.diagonal, density=bin_density, seed=seed),
                             LocalSolver(method))
-        seconds["rebin"] = time.perf_counter() - t1
+        seconds.lap("rebin")
         engine = SurfaceEngine(plan, method=method)
-        t2 = time.perf_counter()
         every = plan.complex.n_vertices  # more than the collapses: relocate after each
         stats = decimate(engine, n_vertices, queue=queue, choices=choices, switch_factor=switch_factor, seed=seed,
                          relocation=every if relocation is None else relocation, progress=progress)
-        seconds["decimation"] = time.perf_counter() - t2
-        t3 = time.perf_counter()
+        seconds.lap("decimation")
+        engine = _finer(engine, final_density_factor, method)
+        seconds.lap("final_rebin")
         stats.relocations += _final_passes(engine, final_relocations)
-        seconds["final_relocation"] = time.perf_counter() - t3
-    return _result(plan, frame, stats, seconds)
+        seconds.lap("final_relocation")
+    return _result(engine.plan, frame, stats, dict(seconds))
+
+
+def _initial_plan(q, m, method, fraction, seed, max_sweeps, bin_density, n_vertices) -> SurfacePlan:
+    """The plan of the initial complex (§4.1) of canonical points ``q`` and
+    masses ``m``; raises where it has fewer than ``n_vertices`` vertices."""
+    plan = initial_complex(q, m, LocalSolver(method), fraction=fraction, seed=seed, max_sweeps=max_sweeps,
+                           settings=initial_settings(q, seed, bin_density)).plan
+    if plan.complex.n_vertices < n_vertices:
+        raise ValueError(f"n_vertices ({n_vertices}) exceeds the {plan.complex.n_vertices} vertices of the "
+                         "initial complex; lower it or raise fraction")
+    return plan
+
+
+class Laps(dict):
+    """Wall time of named steps, each timed from the end of the one before
+    (the first from the object's creation)."""
+
+    def __init__(self):
+        super().__init__()
+        self._since = time.perf_counter()
+
+    def lap(self, name: str) -> None:
+        now = time.perf_counter()
+        self[name], self._since = now - self._since, now
+
+
+def _finer(engine: SurfaceEngine, factor: float, method: str) -> SurfaceEngine:
+    """The engine on the plan re-binned at ``factor`` times its density (the
+    same engine where ``factor`` is 1)."""
+    if factor == 1:
+        return engine
+    plan = engine.plan
+    settings = plan.settings._replace(density=plan.settings.density * factor)
+    return SurfaceEngine(rebinned(plan, settings, LocalSolver(method)), method=method)
 
 
 def _final_passes(engine: SurfaceEngine, passes: int) -> int:

@@ -83,12 +83,29 @@ def test_same_seed_writes_the_same_bytes_and_another_seed_differs(tmp_path):
 def test_bin_density_sets_the_bins_of_large_facets():
     """Four times the density: facets of the same area get about four times
     the bins (each facet's count is that of its area when it was made, between 1 and 32)."""
-    kw = {"n_vertices": 8, "fraction": 0.2, "relocation": 0, "final_relocations": 0}
+    kw = {"n_vertices": 8, "fraction": 0.2, "relocation": 0, "final_relocations": 0, "final_density_factor": 1}
     _, coarse = run(SQUARE, 150, seed=4, **kw)
     _, fine = run(SQUARE, 150, seed=4, bin_density=600.0, **kw)
     bins = lambda r: np.array([len(r.plan.bins[t].capacity) for t in r.plan.facet_entries])  # noqa: E731
     assert fine.plan.settings.density == 4 * coarse.plan.settings.density == 600
     assert bins(fine).sum() > 2 * bins(coarse).sum()
+
+
+def test_the_final_finer_bins_sharpen_the_creases_of_a_staircase():
+    """The final passes on bins four times as dense (the default) bring the
+    creases and the surface closer to the truth than the decimation's bins."""
+    from otjax.datasets3d import staircase
+    from otjax.metrics3d import chamfer, crease_error
+
+    pts, truth = staircase(300, noise=0.0, seed=5)
+    kw = {"n_vertices": 20, "seed": 5, "solver": "exact", "choices": 10, "max_sweeps": 1, "fraction": 0.2}
+    coarse = reconstruct_surface(pts, final_density_factor=1, **kw)
+    fine = reconstruct_surface(pts, **kw)
+    assert fine.plan.settings.density == 4 * coarse.plan.settings.density
+    assert fine.seconds["final_rebin"] > 0 and coarse.seconds["final_rebin"] < fine.seconds["final_rebin"]
+    errors = [(crease_error(r.vertices, r.triangles, truth.creases).mean,
+               chamfer(r.vertices, r.triangles, r.edges, r.isolated, truth=truth)) for r in (coarse, fine)]
+    assert errors[1][0] < 0.8 * errors[0][0] and errors[1][1] < 0.9 * errors[0][1]
 
 
 @pytest.mark.parametrize("kw, match", [
@@ -102,6 +119,8 @@ def test_bin_density_sets_the_bins_of_large_facets():
     ({"queue": "lifo"}, "queue"),
     ({"bin_density": 0.0}, "bin_density must be > 0"),
     ({"bin_density": float("nan")}, "bin_density"),
+    ({"final_density_factor": 0.5}, "final_density_factor"),
+    ({"final_density_factor": float("inf")}, "final_density_factor"),
 ])
 def test_bad_input_is_one_clear_value_error(kw, match):
     args = {"points": np.random.default_rng(0).random((10, 3)), "masses": None, "n_vertices": 5, **kw}
