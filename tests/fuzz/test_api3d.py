@@ -72,14 +72,16 @@ def spy(name):
        queue=st.sampled_from(["multiple-choice", "exhaustive", "parallel", "fifo", None]),
        choices=st.one_of(st.integers(-1, 50), st.just(2.5)), fraction=st.sampled_from([0.15, 0.0, 1.0, 2.0, -0.1, np.nan]),
        solver=st.sampled_from(["batched", "exact", "auto", ""]),
-       seed=st.one_of(st.integers(-5, 2**70), st.sampled_from([1.5, None, "0"])))
+       seed=st.one_of(st.integers(-5, 2**70), st.sampled_from([1.5, None, "0"])),
+       final_density_factor=st.sampled_from([4.0, 1, 0.5, np.nan, np.inf, "2", None]))
 def test_reconstruct_surface_validates_or_names_the_problem(monkeypatch, points, masses, n_vertices, queue, choices,
-                                                             fraction, solver, seed):
+                                                             fraction, solver, seed, final_density_factor):
     monkeypatch.setattr(reconstruct_module, "initial_complex", spy("initial_complex"))
     try:
         with warnings_are_errors():
             reconstruct_surface(points, make_masses(masses, points), n_vertices, queue=queue, choices=choices,
-                                fraction=fraction, solver=solver, seed=seed)
+                                fraction=fraction, solver=solver, seed=seed,
+                                final_density_factor=final_density_factor)
     except ValueError as err:
         assert str(err).strip()
     except Validated:
