@@ -144,7 +144,7 @@ def reconstruct_surface(points, masses=None, n_vertices: int = 100, *, queue: st
       >>> pts = np.random.default_rng(0).random((300, 3)) * [1, 1, 0]  # doctest: +SKIP
       >>> r = reconstruct_surface(pts, n_vertices=10, solver="exact")  # doctest: +SKIP
     """
-    seconds = Laps()
+    seconds = _Laps()
     solver = surface_solver(solver)
     points, masses = _checked(points, masses, n_vertices, queue, choices, switch_factor, solver, fraction,
                               bin_density)
@@ -184,7 +184,7 @@ def _initial_plan(q, m, method, fraction, seed, max_sweeps, bin_density, n_verti
     return plan
 
 
-class Laps(dict):
+class _Laps(dict):
     """Wall time of named steps, each timed from the end of the one before
     (the first from the object's creation)."""
 
