@@ -147,8 +147,7 @@ def reconstruct_surface(points, masses=None, n_vertices: int = 100, *, queue: st
     seconds = _Laps()
     solver = surface_solver(solver)
     points, masses = _checked(points, masses, n_vertices, queue, choices, switch_factor, solver, fraction,
-                              bin_density)
-    final_density_factor = check_number("final_density_factor", final_density_factor, minimum=1.0)
+                              bin_density, final_density_factor)
     seed = check_number("seed", seed, integer=True)
     relocation = check_number("relocation", relocation, minimum=0, integer=True, allow_none=True)
     final_relocations = check_number("final_relocations", final_relocations, minimum=0, integer=True)
@@ -228,13 +227,15 @@ def surface_solver(solver: str | None) -> str:
     return "exact" if default_solver() == "exact" else "batched"
 
 
-def _checked(points, masses, n_vertices, queue, choices, switch_factor, solver, fraction, bin_density):
+def _checked(points, masses, n_vertices, queue, choices, switch_factor, solver, fraction, bin_density,
+             final_density_factor):
     """Validated ``(points, masses)``; raises on bad parameters."""
     points, masses = check_points(points, masses, dim=3, min_points=4)
     if masses is not None and np.any(masses <= 0):
         raise ValueError(f"masses must be > 0: {int(np.sum(masses <= 0))} are not")
     if not check_number("bin_density", bin_density) > 0:
         raise ValueError(f"bin_density must be > 0, got {bin_density}")
+    check_number("final_density_factor", final_density_factor, minimum=1.0)
     check_target(n_vertices, len(points), minimum=4)
     if queue not in QUEUES:
         raise ValueError(f"queue must be one of {', '.join(QUEUES)}, got {queue!r}")
