@@ -27,6 +27,10 @@ from otjax.metrics import point_segment_distance, sample_segments
 #: Default sharpness above which an output edge is a crease: the usual
 #: "feature angle" of mesh tools (docs/decisions.md#crease_angle).
 CREASE_ANGLE = np.deg2rad(30.0)
+#: Two triangles whose half planes around an edge are closer than this lie
+#: over each other (a fold): a defect of the output, not a crease, however
+#: sharp the turn (docs/decisions.md#folds).
+FOLD_ANGLE = np.deg2rad(30.0)
 #: Default sampling step of the output, as a share of the truth's diagonal.
 STEP = 0.005
 # Point-triangle pairs measured at once: about 8 MiB per (n, 3) float64 temporary.
@@ -298,10 +302,11 @@ class EdgeSharpness(NamedTuple):
     Attributes:
       edges: ``(E, 2)`` int64, each row increasing, rows sorted.
       n_triangles: ``(E,)`` triangles on each edge (1: a boundary edge).
-      angle: ``(E,)`` radians in ``[0, pi]``: over pairs of triangles on
-        the edge, the largest ``pi - `` the angle between their half planes
-        (0 for flat, ``pi / 2`` for a cube's edge); 0 on boundary edges and
-        between degenerate triangles.
+      angle: ``(E,)`` radians in ``[0, pi - FOLD_ANGLE]``: over pairs of
+        triangles on the edge that do not fold (their half planes at least
+        :data:`FOLD_ANGLE` apart), the largest ``pi - `` the angle between
+        their half planes (0 for flat, ``pi / 2`` for a cube's edge); 0 on
+        boundary edges, between degenerate triangles and where every pair folds.
     """
 
     edges: np.ndarray
@@ -336,7 +341,8 @@ def edge_sharpness(vertices, triangles) -> EdgeSharpness:
         x, y = np.triu_indices(len(i), 1)
         u, v = w[i[x]], w[i[y]]
         between = np.arctan2(np.linalg.norm(np.cross(u, v), axis=1), np.einsum("nd,nd->n", u, v))
-        angle[e] = np.pi - between.min()
+        between = between[between >= FOLD_ANGLE]
+        angle[e] = np.pi - between.min() if len(between) else 0.0
     return EdgeSharpness(rows[start, :2], count, angle)
 
 

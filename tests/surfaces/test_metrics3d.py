@@ -158,7 +158,7 @@ def hinge(opening, rng):
     return v @ q.T + rng.normal(size=3), np.array([[0, 1, 2], [1, 0, 3]])
 
 
-@pytest.mark.parametrize("opening", [np.pi, 2.5, np.pi / 2, 0.4])
+@pytest.mark.parametrize("opening", [np.pi, 2.5, np.pi / 2, 0.6])
 def test_edge_sharpness_of_a_hinge(opening):
     v, tri = hinge(opening, np.random.default_rng(5))
     s = metrics3d.edge_sharpness(v, tri)
@@ -167,6 +167,19 @@ def test_edge_sharpness_of_a_hinge(opening):
     assert s.angle[shared[0]] == pytest.approx(np.pi - opening, abs=1e-12)
     assert np.all(s.angle[s.n_triangles == 1] == 0)
     assert len(metrics3d.boundary_edges(tri)) == 4
+
+
+@pytest.mark.parametrize("opening", [0.0, 0.2, 0.5])
+def test_a_folded_hinge_is_not_a_crease(opening):
+    # half planes closer than FOLD_ANGLE (0.52 rad) lie over each other: a fold, however sharp the turn
+    v, tri = hinge(opening, np.random.default_rng(7))
+    s = metrics3d.edge_sharpness(v, tri)
+    assert s.angle[s.n_triangles == 2].tolist() == [0.0]
+    assert metrics3d.crease_error(v, tri, v[None, [0, 1]]).mean == np.inf
+    # a third triangle that is not folded over either makes the edge a crease again
+    v3 = np.vstack([v, v[0] + np.cross(v[1] - v[0], v[2] - v[0])])
+    s3 = metrics3d.edge_sharpness(v3, np.vstack([tri, [[0, 1, 4]]]))
+    assert s3.angle[s3.n_triangles == 3][0] == pytest.approx(np.pi / 2 + opening, abs=1e-9)
 
 
 def test_cube_and_crossing_creases():
