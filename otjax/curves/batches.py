@@ -12,7 +12,7 @@ import numpy as np
 
 from otjax.batch.packing import choose_packing
 from otjax.curves import scoring
-from otjax.curves.export import export_jobs
+from otjax.curves.export import Stencils, export_jobs
 from otjax.curves.host_batch import HostBatch
 from otjax.curves.stencils import CandidateStencil
 
@@ -61,16 +61,29 @@ def batch_of_located(cands: list[CandidateStencil]) -> HostBatch:
 
 
 def located_jobs(batch: HostBatch, jobs: np.ndarray) -> HostBatch:
-    """The jobs ``jobs`` of ``batch``, every row of them located
-    (:func:`~otjax.curves.host_location.keep_located`,
+    """The jobs ``jobs`` (increasing) of an exported ``batch``, every row of
+    them located (:func:`~otjax.curves.host_location.keep_located`,
     :func:`~otjax.curves.host_location.locate_on_host`), as a batch of their own.
 
     A job's scores do not depend on the other jobs of its batch, so scoring
-    these again alone gives what scoring the whole batch again would.
+    these again alone gives what scoring the whole batch again would. The
+    arrays are those :func:`batch_of_located` makes of the located
+    candidates, cut out of the batch's at once; the candidates are made
+    when read (:class:`~otjax.curves.export.Stencils`).
     """
-    cands = []
-    for j in jobs.tolist():
-        c = batch.cands[j]
-        rs = slice(batch.row_start[j], batch.row_start[j + 1])
-        cands.append(c._replace(cand=batch.row_cand[rs] - batch.edge_start[j], triangle_of_point=batch.row_tri[rs]))
-    return batch_of_located(cands)
+    in_job = np.zeros(len(batch.row_start) - 1, bool)
+    in_job[jobs] = True
+    rows, edges = in_job[batch.row_job], in_job[batch.edge_job]
+    n_rows, n_edges = np.diff(batch.row_start)[jobs], np.diff(batch.edge_start)[jobs]
+    row_job = np.repeat(np.arange(len(jobs)), n_rows)
+    edge_start = np.concatenate([[0], np.cumsum(n_edges)])
+    row_cand = batch.row_cand[rows] + (edge_start[:-1] - batch.edge_start[jobs])[row_job][:, None]
+    edge_job = np.repeat(np.arange(len(jobs)), n_edges)
+    out = HostBatch.without_triangles(batch.row_point[rows], row_cand, row_job, batch.edge_xy[edges],
+                                      edge_job, [None] * len(jobs), before=batch.before[jobs],
+                                      row_tri=batch.row_tri[rows])
+    out.n_inside = batch.n_inside[jobs]
+    # The candidates read the new batch's arrays: made once it exists (the placeholders above only count).
+    jobs_out = [batch.cands.jobs[j] for j in jobs.tolist()]
+    out.cands = Stencils(jobs_out, out, batch.cands.edge_keys[edges], on_host=True)
+    return out

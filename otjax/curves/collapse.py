@@ -253,13 +253,35 @@ def plan_flips(tri, source: int, target: int) -> Flips | None:
       The :class:`Flips`, or ``None`` if an end is pinned or the vertices
       are not adjacent.
     """
-    if tri.pinned[source] or tri.pinned[target]:
-        return None
+    return plan_flips_from(tri, source, (target,))[0]
+
+
+def plan_flips_from(tri, source: int, targets) -> list[Flips | None]:
+    """:func:`plan_flips` of ``(source, t)`` for each of ``targets``.
+
+    The half-edges leaving a vertex are planned together: its star and the
+    coordinates of its ring edges are read once for all of them.
+    """
+    xyl, pinned = tri.xy_list, tri.pinned
+    if pinned[source] or all(pinned[t] for t in targets):
+        return [None] * len(targets)
     ring, star = tri.star(source)
-    if target not in ring:
-        return None
-    if _sees_every_edge(tri.xy_list, target, ring):
-        return Flips(ring, star, (), (), ring, _fan(target, ring))
+    edges = [(a, b, *xyl[a], *xyl[b]) for a, b in zip(ring, ring[1:] + ring[:1])]
+    out = []
+    for target in targets:
+        if pinned[target] or target not in ring:
+            out.append(None)
+            continue
+        fan = _visible_fan(xyl[target], target, edges)
+        if fan is not None:
+            out.append(Flips(ring, star, (), (), ring, fan))
+        else:
+            out.append(_clipped_flips(tri, source, target, ring, star))
+    return out
+
+
+def _clipped_flips(tri, source: int, target: int, ring, star) -> Flips:
+    """The flips of :func:`plan_collapse` when some ring edge may block ``target``."""
     polygon = _Ring(tri, source, target, ring)
     poly = polygon.poly
     clipped: list[int] = []
@@ -279,24 +301,29 @@ def _fan(target: int, poly) -> tuple[tuple[int, int, int], ...]:
     return tuple((target, poly[k], poly[(k + 1) % n]) for k in range(n) if target not in (poly[k], poly[(k + 1) % n]))
 
 
-def _sees_every_edge(xyl: list, target: int, ring) -> bool:
-    """Whether every ring edge away from ``target`` is certainly CCW seen
-    from it (the float filter of :func:`~otjax.predicates.orient_scalar`):
-    most collapses need no flip, and this answers them without the
-    planning machinery. ``False`` when unsure: the full planning decides."""
-    tx, ty = xyl[target]
-    n = len(ring)
-    for k in range(n):
-        a, b = ring[k], ring[(k + 1) % n]
+def _visible_fan(target_xy, target: int, edges) -> tuple[tuple[int, int, int], ...] | None:
+    """:func:`_fan` of the ring, when every ring edge away from ``target``
+    is certainly CCW seen from it (the float filter of
+    :func:`~otjax.predicates.orient_scalar`); ``None`` when unsure (the full
+    planning decides). Most collapses need no flip: this answers them
+    without the planning machinery.
+
+    Args:
+      target_xy: ``[x, y]`` of ``target``.
+      edges: ``(a, b, ax, ay, bx, by)`` of each ring edge, in ring order.
+    """
+    tx, ty = target_xy
+    fan = []
+    for a, b, ax, ay, bx, by in edges:
         if a == target or b == target:
             continue
-        (ax, ay), (bx, by) = xyl[a], xyl[b]
         left = (ax - tx) * (by - ty)
         right = (ay - ty) * (bx - tx)
         det = left - right
         if not det > ORIENT_ERR * (abs(left) + abs(right)):
-            return False
-    return True
+            return None
+        fan.append((target, a, b))
+    return tuple(fan)
 
 
 def plan_from_flips(tri, source: int, target: int, flips: Flips) -> CollapsePlan | None:
@@ -323,5 +350,4 @@ def _link_after_flips(tri, target: int, poly, flipped_out) -> bool:
         elif b == target:
             nb.add(c)
     k = poly.index(target)
-    opposite = {poly[k - 1], poly[(k + 1) % len(poly)]}
-    return (set(poly) & nb) == opposite
+    return nb.intersection(poly) == {poly[k - 1], poly[(k + 1) % len(poly)]}

@@ -18,21 +18,69 @@ import numpy as np
 from otjax.curves import scoring
 from otjax.curves.host_batch import HostBatch
 from otjax.curves.host_location import locate_on_host
-from otjax.curves.stencils import CandidateStencil, Job, triangle_edges
-from otjax.stencil import ragged_index
+from otjax.curves.stencils import CandidateStencil, Job
 
 
-def _new_triangles(jobs: list[Job], xy: np.ndarray):
+# The (job, a, b) edge code of _local_edges must not wrap.
+_CODE_MAX = np.iinfo(np.int64).max
+
+
+def _offsets(counts: np.ndarray) -> np.ndarray:
+    """``(len(counts) + 1,)`` int64 offsets of runs of ``counts`` laid end to end."""
+    out = np.zeros(len(counts) + 1, np.int64)
+    np.cumsum(counts, out=out[1:])
+    return out
+
+
+class _PerJob(NamedTuple):
+    """What the export reads of each job of a batch, in one pass over them.
+
+    Attributes:
+      n_tri, n_flip, n_in, n_out: ``(J,)`` int64 new triangles, flipped-out
+        ears, region points and points across the link.
+      before: ``(J,)`` cost of each job's region before the change.
+      moved: the jobs that are moves.
+      fixed: the jobs with rows fixed to an edge (partial updates).
+    """
+
+    n_tri: np.ndarray
+    n_flip: np.ndarray
+    n_in: np.ndarray
+    n_out: np.ndarray
+    before: np.ndarray
+    moved: list[int]
+    fixed: list[int]
+
+
+def _per_job(jobs: list[Job]) -> _PerJob:
+    """The :class:`_PerJob` of ``jobs``: one Python loop over them rather
+    than one per count (on ~60 small jobs a batch, the loops cost, not the
+    arrays)."""
+    counts: list[int] = []
+    before, moved, fixed = [], [], []
+    for j, job in enumerate(jobs):
+        region = job.region
+        counts += (len(job.triangles), len(job.plan.flipped_out), len(region.inside), len(region.outside))
+        before.append(region.before)
+        if job.moved is not None:
+            moved.append(j)
+        if job.fixed_edge is not None:
+            fixed.append(j)
+    table = np.fromiter(counts, np.int64, len(counts)).reshape(-1, 4)
+    # n_in becomes a batch field: its own buffer, not a view holding the table (held_bytes counts buffers).
+    return _PerJob(table[:, 0], table[:, 1], table[:, 2].copy(), table[:, 3], np.array(before), moved, fixed)
+
+
+def _new_triangles(jobs: list[Job], per_job: _PerJob, xy: np.ndarray):
     """``(tris (T, 3), coords (T, 3, 2), tri_start (J + 1,))`` of the jobs,
     the moved vertex of a move at its new position."""
-    n_tri = np.array([len(job.triangles) for job in jobs])
     tris = np.concatenate([job.triangles for job in jobs])
     coords = xy[tris]
-    tri_start = np.concatenate([[0], np.cumsum(n_tri)])
-    for j, job in enumerate(jobs):
-        if job.moved is not None:
-            s = slice(tri_start[j], tri_start[j + 1])
-            coords[s] = np.where((job.triangles == job.plan.source)[..., None], job.moved, coords[s])
+    tri_start = _offsets(per_job.n_tri)
+    for j in per_job.moved:
+        job = jobs[j]
+        s = slice(tri_start[j], tri_start[j + 1])
+        coords[s] = np.where((job.triangles == job.plan.source)[..., None], job.moved, coords[s])
     return tris, coords, tri_start
 
 
@@ -70,7 +118,7 @@ class _Fans(NamedTuple):
     few_ears: np.ndarray
 
 
-def _local_edges(jobs: list[Job], tris: np.ndarray, tri_start: np.ndarray, xy: np.ndarray) -> _Edges:
+def _local_edges(jobs: list[Job], per_job: _PerJob, tris: np.ndarray, xy: np.ndarray) -> _Edges:
     """Local edges of every job.
 
     Keys are coded job-major, so ``np.unique`` numbers every job's edges
@@ -79,80 +127,75 @@ def _local_edges(jobs: list[Job], tris: np.ndarray, tri_start: np.ndarray, xy: n
     """
     nv = len(xy)
     nj = len(jobs)
-    if nj * nv * nv > np.iinfo(np.int64).max:  # the (job, a, b) code below must not wrap
+    if nj * nv * nv > _CODE_MAX:  # the (job, a, b) code below must not wrap
         raise ValueError(f"{nj} jobs over {nv} vertices overflow the int64 edge code; use fewer initial vertices")
-    tri_job = np.repeat(np.arange(nj), np.diff(tri_start))
-    e = triangle_edges(tris)  # (T, 3, 2)
-    code = (np.repeat(tri_job, 3) * nv + e[..., 0].ravel()) * nv + e[..., 1].ravel()
+    tri_job = np.repeat(np.arange(nj), per_job.n_tri)
+    nxt = tris[:, [1, 2, 0]]  # edge k of a triangle: (tris[k], nxt[k]), as in triangle_edges
+    code = ((tri_job[:, None] * nv + np.minimum(tris, nxt)) * nv + np.maximum(tris, nxt)).ravel()
     ucode, inv = np.unique(code, return_inverse=True)
     edge_job = ucode // (nv * nv)
     edge_start = np.searchsorted(edge_job, np.arange(nj + 1))
     ukeys = np.stack([(ucode // nv) % nv, ucode % nv], 1)
     tri_edges = np.sort(inv.reshape(-1, 3), 1)
     edge_xy = xy[ukeys]
-    for j, job in enumerate(jobs):
-        if job.moved is not None:
-            es = slice(edge_start[j], edge_start[j + 1])
-            edge_xy[es] = np.where((ukeys[es] == job.plan.source)[..., None], job.moved, edge_xy[es])
+    for j in per_job.moved:
+        job = jobs[j]
+        es = slice(edge_start[j], edge_start[j + 1])
+        edge_xy[es] = np.where((ukeys[es] == job.plan.source)[..., None], job.moved, edge_xy[es])
     return _Edges(ucode, ukeys, edge_start, edge_job, edge_xy, tri_edges)
 
 
-def _rows(jobs: list[Job], ucode: np.ndarray, edge_start: np.ndarray, nv: int) -> _Rows:
+def _rows(jobs: list[Job], per_job: _PerJob, ucode: np.ndarray, edge_start: np.ndarray, nv: int) -> _Rows:
     """Rows of every job: the points of its region, then the points across
     its link that keep their link edge (their candidate: that edge); rows
     whose edge is known (a partial update) are fixed to it.
     """
     nj = len(jobs)
-    n_in = np.array([len(job.region.inside) for job in jobs])
-    n_out = np.array([len(job.region.outside) for job in jobs])
-    n_rows = n_in + n_out
-    row_start = np.concatenate([[0], np.cumsum(n_rows)])
-    parts = []
-    for job in jobs:
-        parts += [job.region.inside, job.region.outside]
-    row_point = np.concatenate(parts).astype(np.int64)
+    n_rows = per_job.n_in + per_job.n_out
+    row_start = _offsets(n_rows)
+    row_point = np.concatenate([a for job in jobs for a in (job.region.inside, job.region.outside)])
+    row_point = row_point.astype(np.int64, copy=False)
     row_job = np.repeat(np.arange(nj), n_rows)
     row_cand = np.zeros((len(row_point), 3), np.int64)
-    row_locate = np.ones(len(row_point), bool)
-    if n_out.sum():
-        out_job, k = ragged_index(n_out)
-        out_rows = row_start[out_job] + n_in[out_job] + k
+    # Each job's region rows are located, the rows across its link are not.
+    runs = np.stack([per_job.n_in, per_job.n_out], 1).ravel()
+    row_locate = np.repeat(np.tile(np.array([True, False]), nj), runs)
+    out_rows = np.flatnonzero(~row_locate)
+    if len(out_rows):
         # The (job, a, b) code of _local_edges: job * V^2 + the region's link key.
-        lk = out_job * (nv * nv) + np.concatenate([job.region.outside_key for job in jobs])
+        lk = row_job[out_rows] * (nv * nv) + np.concatenate([job.region.outside_key for job in jobs])
         row_cand[out_rows] = np.searchsorted(ucode, lk)[:, None]
-        row_locate[out_rows] = False
-    for j, job in enumerate(jobs):
-        if job.fixed_edge is not None:
-            k = np.flatnonzero(job.fixed_edge >= 0)
-            row_cand[row_start[j] + k] = (edge_start[j] + job.fixed_edge[k])[:, None]
-            row_locate[row_start[j] + k] = False
-    return _Rows(row_point, row_job, row_cand, row_locate, row_start, n_in)
+    for j in per_job.fixed:
+        fixed_edge = jobs[j].fixed_edge
+        k = np.flatnonzero(fixed_edge >= 0)
+        row_cand[row_start[j] + k] = (edge_start[j] + fixed_edge[k])[:, None]
+        row_locate[row_start[j] + k] = False
+    return _Rows(row_point, row_job, row_cand, row_locate, row_start, per_job.n_in)
 
 
-def _fans(jobs: list[Job], coords: np.ndarray, tri_start: np.ndarray) -> _Fans:
+def _fans(per_job: _PerJob, coords: np.ndarray, tri_start: np.ndarray) -> _Fans:
     """The new triangles of a job are its flipped-out ears, then a fan around
     one apex (the target, or the moved vertex), CCW: the fan keys the kernel
     searches and the ears it tests.
     ``few_ears``: whether a job's ears fit the kernel's :data:`scoring.MAX_EARS`.
     """
-    nj = len(jobs)
-    n_tri = np.diff(tri_start)
-    n_flip = np.fromiter((len(job.plan.flipped_out) for job in jobs), np.int64, nj)
+    nj = len(per_job.n_tri)
+    n_flip = per_job.n_flip
     fan_start = tri_start[:-1] + n_flip
-    n_fan = n_tri - n_flip
-    job_fan = np.concatenate([[0], np.cumsum(n_fan)])
-    fan_job, k = ragged_index(n_fan)
-    fan_tri = fan_start[fan_job] + k
+    n_fan = per_job.n_tri - n_flip
+    job_fan = _offsets(n_fan)
+    fan_job = np.repeat(np.arange(nj), n_fan)
+    fan_tri = np.arange(len(fan_job)) + (fan_start - job_fan[:-1])[fan_job]
     apex = coords[fan_start, 0]  # (J, 2): fan triangles are (apex, a, b)
-    d = coords[fan_start, 1] - apex
-    theta = scoring.pseudo_angle(d[:, 0], d[:, 1])
-    d = coords[fan_tri, 1] - apex[fan_job]
-    phi = np.mod(scoring.pseudo_angle(d[:, 0], d[:, 1]) - theta[fan_job], 4.0)
+    # The first spoke of each job, then the first spoke of each fan triangle: one pseudo-angle call.
+    d = np.concatenate([coords[fan_start, 1] - apex, coords[fan_tri, 1] - apex[fan_job]])
+    angle = scoring.pseudo_angle(d[:, 0], d[:, 1])
+    theta = angle[:nj].copy()  # a batch field: its own buffer (see _per_job)
+    phi = np.mod(angle[nj:] - theta[fan_job], 4.0)
     phi[job_fan[:-1]] = 0.0
-    ears = np.full((nj, scoring.MAX_EARS), -1, np.int64)
     few = n_flip <= scoring.MAX_EARS
-    ej, k = ragged_index(np.where(few, n_flip, 0))
-    ears[ej, k] = tri_start[ej] + k
+    slot = np.arange(scoring.MAX_EARS)
+    ears = np.where(slot < np.where(few, n_flip, 0)[:, None], tri_start[:-1, None] + slot, -1)
     return _Fans(fan_job * 8.0 + phi, fan_tri, job_fan, apex, theta, ears, few)
 
 
@@ -183,9 +226,9 @@ class Stencils(Sequence):
     def __len__(self) -> int:
         return len(self.jobs)
 
-    def plan(self, j: int):
-        """The plan of job ``j`` (without making its stencil)."""
-        return self.jobs[j].plan
+    def plans(self) -> list:
+        """The plan of each job (without making their stencils)."""
+        return [job.plan for job in self.jobs]
 
     def __getitem__(self, j):
         if isinstance(j, slice):
@@ -217,10 +260,11 @@ def export_jobs(jobs: list[Job], plan, on_host: bool) -> HostBatch:
         return HostBatch.empty()
     xy, points, point_rows = plan.tri.xy, plan.points, plan.point_rows
     nv = len(xy)
-    tris, coords, tri_start = _new_triangles(jobs, xy)
-    edges = _local_edges(jobs, tris, tri_start, xy)
-    rows = _rows(jobs, edges.code, edges.start, nv)
-    fans = _fans(jobs, coords, tri_start)
+    per_job = _per_job(jobs)
+    tris, coords, tri_start = _new_triangles(jobs, per_job, xy)
+    edges = _local_edges(jobs, per_job, tris, xy)
+    rows = _rows(jobs, per_job, edges.code, edges.start, nv)
+    fans = _fans(per_job, coords, tri_start)
     batch = HostBatch(
         cands=(), row_point=rows.point, row_job=rows.job, row_cand=rows.cand, row_locate=rows.locate,
         row_tri=np.full(len(rows.point), -1, np.int64), row_start=rows.start, edge_start=edges.start,

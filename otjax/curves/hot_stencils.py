@@ -59,16 +59,21 @@ class HotStencils:
     def keep(self, call: int, size: int, entries: list[tuple[tuple[int, int], HotEntry]]) -> None:
         """Keeps the ``(half-edge, entry)`` pairs of one call (``size`` bytes
         held), dropping the oldest calls' beyond the budget."""
+        by_source = self._by_source
         for (s, t), entry in entries:
-            self._by_source.setdefault(s, {})[t] = entry
+            targets = by_source.get(s)
+            if targets is None:
+                targets = by_source[s] = {}
+            targets[t] = entry
         self._calls[call] = (size, [key for key, _ in entries])
         self._bytes += size
         while self._bytes > self.budget and len(self._calls) > 1:
             old, (n, old_keys) = self._calls.popitem(last=False)
             self._bytes -= n
             for s, t in old_keys:
-                targets = self._by_source.get(s)
-                if targets is not None and t in targets and targets[t].call == old:
+                targets = by_source.get(s)
+                entry = None if targets is None else targets.get(t)
+                if entry is not None and entry.call == old:
                     del targets[t]
 
     def pop(self, key: tuple[int, int]) -> HotEntry | None:

@@ -19,7 +19,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from otjax.curves.collapse import CollapsePlan, MovePlan, link_condition, plan_flips, plan_from_flips
+from otjax.curves.collapse import CollapsePlan, MovePlan, link_condition, plan_flips_from, plan_from_flips
 
 _NO_IDS = np.zeros(0, np.int64)
 
@@ -138,6 +138,25 @@ def triangle_edges(tris: np.ndarray) -> np.ndarray:
     return np.sort(np.stack([tris, tris[:, [1, 2, 0]]], -1), -1)
 
 
+def _plan_entry(tri, source: int, target: int, stamps: tuple[int, int], flips, old_plan=None,
+                old_triangles=None) -> tuple:
+    """The cache entry of a half-edge whose flips are ``flips``, at the star
+    versions ``stamps`` (see :meth:`StencilCache._plan_entries`).
+
+    ``old_plan`` (and its ``old_triangles``) is the plan of the same flips
+    at an older star of the target: kept, the same object (plans are
+    compared by identity first), while the link condition holds.
+    """
+    if flips is None:
+        return (*stamps, None, None, None)
+    if old_plan is not None:
+        if link_condition(tri, target, flips):
+            return (*stamps, flips, old_plan, old_triangles)
+        return (*stamps, flips, None, None)
+    plan = plan_from_flips(tri, source, target, flips)
+    return (*stamps, flips, plan, None if plan is None else np.asarray(plan.new_triangles, np.int64))
+
+
 class StencilCache:
     """Regions and collapse plans of the current state, and jobs built from them.
 
@@ -169,32 +188,36 @@ class StencilCache:
         Its flips depend on the source's star alone: a change of the
         target's star only asks for the link condition again.
         """
-        return self._plan_entry(source, target)[3]
+        return self._plan_entries(source, (target,))[0][3]
 
-    def _plan_entry(self, source: int, target: int) -> tuple:
+    def _plan_entries(self, source: int, targets) -> list[tuple]:
         """``(source's star version, target's, Flips | None, CollapsePlan |
-        None, (T, 3) int64 new triangles | None)`` of a half-edge, current."""
+        None, (T, 3) int64 new triangles | None)`` of the half-edge from
+        ``source`` to each of ``targets``, current. The flips not at hand are
+        planned together (:func:`~otjax.curves.collapse.plan_flips_from`)."""
         sv = self.log.star_version
-        s_stamp, t_stamp = sv[source], sv[target]
+        s_stamp = sv[source]
         plans = self._plans.get(source)
         if plans is None:
             plans = self._plans[source] = {}
-        hit = plans.get(target)
         tri = self.plan.tri
-        if hit is not None and hit[0] == s_stamp:
-            if hit[1] == t_stamp:
-                return hit
-            flips = hit[2]
-            if hit[3] is not None and link_condition(tri, target, flips):
-                # The same plan: keep its object (compared by identity first).
-                entry = plans[target] = (s_stamp, t_stamp, flips, hit[3], hit[4])
-                return entry
-        else:
-            flips = plan_flips(tri, source, target)
-        plan = None if flips is None else plan_from_flips(tri, source, target, flips)
-        tris = None if plan is None else np.asarray(plan.new_triangles, np.int64)
-        entry = plans[target] = (s_stamp, t_stamp, flips, plan, tris)
-        return entry
+        out: list = []
+        missing: list[int] = []
+        for target in targets:
+            hit = plans.get(target)
+            if hit is None or hit[0] != s_stamp:
+                missing.append(len(out))
+                out.append(None)
+                continue
+            t_stamp = sv[target]
+            if hit[1] != t_stamp:
+                hit = plans[target] = _plan_entry(tri, source, target, (s_stamp, t_stamp), *hit[2:])
+            out.append(hit)
+        if missing:
+            wanted = [targets[i] for i in missing]
+            for i, target, flips in zip(missing, wanted, plan_flips_from(tri, source, wanted)):
+                out[i] = plans[target] = _plan_entry(tri, source, target, (s_stamp, sv[target]), flips)
+        return out
 
     def region(self, v: int) -> Region:
         """The :class:`Region` of ``v``, cached until a change touches it."""
@@ -205,29 +228,26 @@ class StencilCache:
         plan = self.plan
         tri = plan.tri
         ring, star = tri.star(v)
-        n = len(ring)
-        face_pts = plan.face_pts
-        inside = np.concatenate([face_pts[f] for f in star])
-        cost = plan.edge_cost
+        nv = len(tri.xy)
+        face_pts, cost, tris, nbr = plan.face_pts, plan.edge_cost, tri.tri, tri.nbr
         before = 0.0
-        across = []
-        for k in range(n):
-            a, b = ring[k], ring[(k + 1) % n]
+        across, counts, codes = [], [], []
+        for a, b, f in zip(ring, ring[1:] + ring[:1], star):
             before += cost.get((v, a) if v < a else (a, v), 0.0) + cost.get((a, b) if a < b else (b, a), 0.0)
-            f = star[k]
-            g = tri.nbr[f][tri.tri[f].index(v)]
-            across.append(face_pts[g] if g >= 0 else _NO_IDS)
-        # Of the points across each link edge, those assigned to that edge.
-        counts = np.fromiter(map(len, across), np.int64, n)
+            g = nbr[f][tris[f].index(v)]
+            pts = face_pts[g] if g >= 0 else _NO_IDS
+            across.append(pts)
+            counts.append(len(pts))
+            codes.append(a * nv + b if a < b else b * nv + a)
+        inside = np.concatenate([face_pts[f] for f in star])
+        # Of the points across each link edge, those assigned to that edge
+        # (edges compared by their code min * V + max).
         ids = np.concatenate(across)
-        link = np.repeat(np.arange(n), counts)
-        r = np.asarray(ring, np.int64)
-        nxt = np.asarray(ring[1:] + ring[:1], np.int64)
-        lo, hi = np.minimum(r, nxt), np.maximum(r, nxt)
+        link = np.repeat(np.arange(len(ring)), counts)
+        code = np.repeat(np.array(codes, np.int64), counts)
         e = np.take(plan.pt_edge, ids, axis=0)
-        keep = (e[:, 0] == lo[link]) & (e[:, 1] == hi[link])
-        link = link[keep]
-        region = Region(ring, star, inside, ids[keep], link, before, (lo * len(tri.xy) + hi)[link])
+        keep = e[:, 0] * nv + e[:, 1] == code
+        region = Region(ring, star, inside, ids[keep], link[keep], before, code[keep])
         self._regions[v] = (version, region)
         return region
 
@@ -258,8 +278,7 @@ class StencilCache:
             else:
                 allowed = set(targets[v])
                 wanted = [w for w in region.ring if w in allowed]
-            for w in wanted:
-                entry = self._plan_entry(v, w)
+            for entry in self._plan_entries(v, wanted):
                 if entry[3] is not None:
                     jobs.append(Job(entry[3], entry[4], region, None, None))
         return jobs

@@ -18,7 +18,9 @@ from hypothesis import strategies as st
 
 from otjax.batch.fields import PackedBuffers
 from otjax.curves import scoring
+from otjax.curves.batches import batch_of_located, located_jobs
 from otjax.curves.engine import CurveEngine
+from otjax.curves.host_location import locate_on_host
 from otjax.curves.triangulation import Triangulation
 from tests.curves.helpers import assert_costs_match, free_vertices, make_engine, noisy_shape, padded_reference
 from tests.point_sets import make_points
@@ -92,6 +94,29 @@ def test_fused_kernel_on_collinear_data_falls_back_exactly():
     for h, r in zip(located, costs):
         np.testing.assert_array_equal(r.triangle, h.triangle_of_point[:h.n_inside])
     assert_costs_match(cands, costs, padded_reference(engine, located))
+
+
+def test_located_jobs_are_the_batch_of_their_located_candidates():
+    """located_jobs cuts jobs out of an exported batch: the batch (and the
+    candidates) that batch_of_located makes of them, located."""
+    pts = make_points("grid", 64, 1)
+    engine = CurveEngine(Triangulation(np.unique(pts, axis=0)), pts, np.ones(len(pts)))
+    batch = engine.export(free_vertices(engine))
+    jobs = np.arange(1, len(batch.cands), 3)
+    locate_on_host(batch, jobs, engine.plan.points, engine.plan.point_rows)
+    got = located_jobs(batch, jobs)
+    want = batch_of_located([batch.cands[j]._replace(
+        cand=batch.row_cand[batch.row_start[j]:batch.row_start[j + 1]] - batch.edge_start[j],
+        triangle_of_point=batch.row_tri[batch.row_start[j]:batch.row_start[j + 1]]) for j in jobs.tolist()])
+    for name, value in vars(want).items():
+        if isinstance(value, np.ndarray):
+            assert getattr(got, name).dtype == value.dtype, name
+            np.testing.assert_array_equal(getattr(got, name), value, err_msg=name)
+    assert len(got.cands) == len(want.cands) == len(jobs)
+    for c, w in zip(got.cands, want.cands):
+        assert c.plan == w.plan and c.n_inside == w.n_inside and c.before == w.before
+        for name in ("keys", "edges", "point_ids", "cand", "triangle_of_point"):
+            np.testing.assert_array_equal(getattr(c, name), getattr(w, name), err_msg=name)
 
 
 def test_relocation_batches_equal_located_relocations():

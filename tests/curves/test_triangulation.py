@@ -6,6 +6,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from otjax.predicates import orient, orient_perturbed
+from otjax.curves.collapse import plan_flips, plan_flips_from
 from otjax.curves.triangulation import Triangulation
 from tests.point_sets import make_points, point_sets
 from tests.profiles import examples  # CI count, thorough count (--hypothesis-profile=thorough)
@@ -50,6 +51,27 @@ def test_collapses_keep_an_embedding(pts, seed):
     # the loop only stops when one interior vertex is left (no eligible edge).
     assert refused == 0
     assert done == min(200, max(n_interior - 1, 0))
+
+
+@SETTINGS
+@given(pts=point_sets, seed=st.integers(0, 2**31 - 1))
+def test_flips_planned_together_match_flips_planned_alone(pts, seed):
+    """plan_flips_from shares a source's star between its targets: each
+    target's flips are still those of planning it alone (pinned and
+    non-adjacent targets included), on hostile inputs too."""
+    t = Triangulation(unique_rows(pts))
+    random_collapses(t, np.random.default_rng(seed), 20)
+    corners = np.flatnonzero(t.pinned).tolist()
+    for s in np.flatnonzero(t.alive & ~t.pinned).tolist():
+        ring = t.star(s)[0]
+        far = [v for v in np.flatnonzero(t.alive).tolist() if v != s and v not in ring][:1]
+        targets = [*ring, *corners[:1], *far]
+        together = plan_flips_from(t, s, targets)
+        assert together == [plan_flips_from(t, s, (w,))[0] for w in targets]
+        assert together == [plan_flips(t, s, w) for w in targets]
+        for w, flips in zip(targets, together):
+            assert (flips is None) == (t.pinned[w] or w not in ring)
+    assert plan_flips_from(t, corners[0], [0]) == [None]
 
 
 def test_initial_triangulation_is_delaunay_and_complete(rng):
