@@ -6,9 +6,9 @@ the NumPy predicate cost ~360 ns a pair (measured: 40 of 60 s of a 50k-point
 run's exhaustive end). :func:`in_triangle_filtered` evaluates the same
 orientation determinants in JAX, with Shewchuk's forward error bound, and
 answers "inside", "outside" or "unsure"; :func:`locate_pairs` settles the
-unsure pairs with the exact host predicate (:func:`in_triangle_exact`, that
-is :func:`otjax.predicates.in_triangle_perturbed` on coordinate rows). Its
-answers are therefore exactly the host predicate's, pair for pair.
+unsure pairs with the exact host predicate
+(:func:`otjax.predicates.in_triangle_perturbed`). Its answers are
+therefore exactly the host predicate's, pair for pair.
 
 Why the filter is sound even if XLA fuses a multiply-add: the bound covers the
 rounding of both products and the subtraction; a fused evaluation rounds
@@ -24,7 +24,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from otjax.batch.pipeline import require_x64
-from otjax.predicates import ORIENT_ERR, orient, orient_scalar
+from otjax.predicates import ORIENT_ERR, in_triangle_perturbed
 
 INSIDE, OUTSIDE, UNSURE = 1, 0, -1
 # Pairs per kernel call: one size, one compiled shape. A chunk costs ~0.25 ms;
@@ -33,11 +33,6 @@ CHUNK = 1 << 14
 # Fewer pairs than this go straight to the host predicate (below the cost of
 # one kernel call).
 MIN_PAIRS = 512
-# Orientations the float filter leaves unsure, up to this many in a call, are
-# settled one at a time by the scalar exact predicate (~2 us each); more go to
-# the vectorised one (~0.2 ms a call below a few hundred; even near 120). On
-# exactly collinear input (a clean 3k-point star) 84% of calls have at most 128.
-SCALAR_UNSURE = 96
 
 
 def _orient_perturbed_filtered(ax, ay, bx, by, px, py) -> tuple[jax.Array, jax.Array]:
@@ -104,50 +99,6 @@ def _padding(size: int) -> tuple[np.ndarray, np.ndarray]:
     return tri, np.full((2, size), 2.0)
 
 
-def in_triangle_exact(tri: np.ndarray, p: np.ndarray, scalar_unsure: int = SCALAR_UNSURE) -> np.ndarray:
-    """:func:`otjax.predicates.in_triangle_perturbed` on coordinate rows.
-
-    The float filter of :func:`~otjax.predicates.orient` (in NumPy, over the
-    three edges of every pair) decides most orientations; the unsure ones are
-    settled exactly, by the scalar predicate when they are few (``<=
-    scalar_unsure``: the vectorised one costs ~0.2 ms a call however few) and
-    by the vectorised one otherwise; then the perturbation decides the exact
-    zeros as :func:`~otjax.predicates.orient_perturbed` does. Every sign is
-    therefore the exact one, and so is every answer.
-
-    Args:
-      tri: ``(6, N)`` float64 rows ``x0, y0, x1, y1, x2, y2`` of
-        counter-clockwise triangles.
-      p: ``(2, N)`` float64 query points, as rows.
-      scalar_unsure: see above (tests set it to force either path).
-
-    Returns:
-      ``(N,)`` bool.
-    """
-    a = tri.reshape(3, 2, -1)  # edge k runs from vertex k to vertex k + 1
-    b = a[[1, 2, 0]]
-    ax, ay, bx, by = a[:, 0], a[:, 1], b[:, 0], b[:, 1]
-    px, py = p[0], p[1]
-    left = (bx - ax) * (py - ay)
-    right = (by - ay) * (px - ax)
-    det = left - right
-    sign = np.sign(det).astype(np.int8)
-    # Exactly zero by construction (as in orient): no exact arithmetic needed.
-    zero = (((bx == ax) | (py == ay)) & ((by == ay) | (px == ax))) | ((px == bx) & (py == by))
-    unsure = np.flatnonzero(~(np.abs(det) > ORIENT_ERR * (np.abs(left) + np.abs(right))) & ~zero)
-    if len(unsure):
-        k, n = np.unravel_index(unsure, det.shape)
-        corners = (ax[k, n], ay[k, n], bx[k, n], by[k, n], px[n], py[n])
-        if len(unsure) <= scalar_unsure:
-            exact = [orient_scalar(*c) for c in zip(*(x.tolist() for x in corners))]
-        else:
-            exact = orient(*(np.stack(corners[i:i + 2], -1) for i in (0, 2, 4)))
-        sign[k, n] = exact
-    # The perturbation p + eps (1, eps) decides exact zeros: the sign of a_y - b_y, else of b_x - a_x.
-    sign = np.where(sign != 0, sign, np.where(ay != by, np.sign(ay - by), np.sign(bx - ax)))
-    return (sign > 0).all(0)
-
-
 def locate_pairs(tri: np.ndarray, p: np.ndarray) -> np.ndarray:
     """Exact perturbed point-in-triangle test for many pairs.
 
@@ -167,7 +118,7 @@ def locate_pairs(tri: np.ndarray, p: np.ndarray) -> np.ndarray:
     n = p.shape[1]
 
     def exact(idx):
-        return in_triangle_exact(tri[:, idx], p[:, idx])
+        return in_triangle_perturbed(tri[:, idx].T.reshape(-1, 3, 2), p[:, idx].T)
 
     if n < MIN_PAIRS:
         return exact(np.arange(n))

@@ -4,7 +4,7 @@ import numpy as np
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from otjax.curves.location import CHUNK, in_triangle_exact, locate_pairs
+from otjax.curves.location import CHUNK, locate_pairs
 from otjax.curves.triangulation import Triangulation
 from otjax.predicates import in_triangle_perturbed
 from tests.point_sets import make_points
@@ -41,26 +41,6 @@ def test_filtered_location_equals_the_exact_predicate(kind, n, seed):
     np.testing.assert_array_equal(got, want)
     # Each query is in exactly one triangle.
     assert np.all(got.reshape(len(queries), -1).sum(1) == 1)
-
-
-@settings(max_examples=examples(60, 600), deadline=None, suppress_health_check=[HealthCheck.too_slow])
-@given(kind=st.sampled_from(["uniform", "near_collinear", "clustered", "duplicates", "grid"]),
-       n=st.integers(8, 60), seed=st.integers(0, 10_000))
-def test_host_location_equals_the_exact_predicate_on_either_exact_path(kind, n, seed):
-    """in_triangle_exact settles the filter's unsure orientations one at a
-    time or vectorised (forced here): the answers of in_triangle_perturbed
-    either way, collinear and repeated points included."""
-    rng = np.random.default_rng(seed)
-    pts = make_points(kind, n, seed)
-    tri = Triangulation(np.unique(pts, axis=0))
-    t = tri.triangles()
-    mid = (tri.xy[t[:, 0]] + tri.xy[t[:, 1]]) / 2
-    third = (tri.xy[t[:, 1]] + 2 * tri.xy[t[:, 2]]) / 3  # rarely exact: the filter is unsure
-    queries = np.concatenate([tri.xy[tri.alive], mid, third, pts + 1e-12 * rng.standard_normal(pts.shape)])
-    a, p = all_pairs(tri, queries)
-    want = in_triangle_perturbed(a, p)
-    for scalar_unsure in (0, 10**9):
-        np.testing.assert_array_equal(in_triangle_exact(*rows(a, p), scalar_unsure=scalar_unsure), want)
 
 
 def test_filtered_location_over_chunk_boundaries():
