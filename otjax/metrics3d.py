@@ -301,7 +301,12 @@ class EdgeSharpness(NamedTuple):
 
     Attributes:
       edges: ``(E, 2)`` int64, each row increasing, rows sorted.
-      n_triangles: ``(E,)`` triangles on each edge (1: a boundary edge).
+      n_triangles: ``(E,)`` triangles on each edge.
+      layers: ``(E,)`` sheets on each edge: its triangles grouped by folds
+        (half planes less than :data:`FOLD_ANGLE` apart, chained), those
+        without a half plane (degenerate) left out; 1 on an edge of one
+        triangle. An edge of one layer is a boundary edge
+        (:func:`boundary_error`): a patch doubled by a fold ends there.
       angle: ``(E,)`` radians in ``[0, pi - FOLD_ANGLE]``: over pairs of
         triangles on the edge that do not fold (their half planes at least
         :data:`FOLD_ANGLE` apart), the largest ``pi - `` the angle between
@@ -311,6 +316,7 @@ class EdgeSharpness(NamedTuple):
 
     edges: np.ndarray
     n_triangles: np.ndarray
+    layers: np.ndarray
     angle: np.ndarray
 
 
@@ -333,17 +339,31 @@ def edge_sharpness(vertices, triangles) -> EdgeSharpness:
     start = np.flatnonzero(new[:len(rows)])
     count = np.diff(np.r_[start, len(rows)])
     angle = np.zeros(len(start))
+    layers = np.ones(len(start), np.int64)
     for e in np.flatnonzero(count > 1):
         i = np.arange(start[e], start[e] + count[e])
         i = i[ok[i]]
+        layers[e] = len(i)
         if len(i) < 2:
             continue
         x, y = np.triu_indices(len(i), 1)
         u, v = w[i[x]], w[i[y]]
         between = np.arctan2(np.linalg.norm(np.cross(u, v), axis=1), np.einsum("nd,nd->n", u, v))
-        between = between[between >= FOLD_ANGLE]
+        folded = between < FOLD_ANGLE
+        layers[e] = _components(len(i), x[folded], y[folded])
+        between = between[~folded]
         angle[e] = np.pi - between.min() if len(between) else 0.0
-    return EdgeSharpness(rows[start, :2], count, angle)
+    return EdgeSharpness(rows[start, :2], count, layers, angle)
+
+
+def _components(n: int, x: np.ndarray, y: np.ndarray) -> int:
+    """Connected components of ``n`` nodes joined by the pairs ``(x[k], y[k])``."""
+    label = np.arange(n)
+    for a, b in zip(x.tolist(), y.tolist()):
+        la, lb = label[a], label[b]
+        if la != lb:
+            label[label == lb] = la
+    return len(np.unique(label))
 
 
 def boundary_edges(triangles) -> np.ndarray:
@@ -407,7 +427,13 @@ def crease_error(vertices, triangles, creases, angle: float = CREASE_ANGLE, step
 
 def boundary_error(vertices, triangles, boundaries, step: float | None = None) -> FeatureError:
     """How far the true boundaries ``(b, 2, 3)`` are from the output's boundary
-    edges (:func:`boundary_edges`), sampled as in :func:`crease_error`."""
+    edges, sampled as in :func:`crease_error`.
+
+    A boundary edge is an edge of one layer (:class:`EdgeSharpness`): on a
+    mesh without folds, an edge of one triangle (:func:`boundary_edges`);
+    where two triangles on an edge lie over each other, the doubled patch
+    also ends there (docs/decisions.md#folds).
+    """
     vertices = _points(vertices, "vertices")
-    return _feature_error(vertices, boundary_edges(_indices(triangles, 3, len(vertices), "triangles")), boundaries,
-                          step)
+    s = edge_sharpness(vertices, triangles)
+    return _feature_error(vertices, s.edges[s.layers == 1], boundaries, step)

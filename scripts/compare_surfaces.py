@@ -19,7 +19,9 @@ Metrics, against the clean shape, in % of D: symmetric Chamfer and
 Hausdorff distance (:func:`otjax.metrics3d.surface_distances`), crease error
 (mean distance from the true creases to the output's edges sharper than
 30 degrees) and boundary error (from the true open borders to the output's
-boundary edges); and the wall time of each method. It prints a markdown
+boundary edges, a fold's two triangles counted as one sheet); "folded", the
+triangles lying over another on one of their edges (0 on a mesh without
+folds); and the wall time of each method. It prints a markdown
 table; ``--json`` writes every number, ``--renders DIR`` one PNG per input
 (points, otjax, Poisson + QEM side by side).
 
@@ -198,11 +200,14 @@ def measure(out: Output, truth, samples: int) -> dict:
                                        samples=samples)
     crease = metrics3d.crease_error(out.vertices, out.triangles, truth.creases)
     boundary = metrics3d.boundary_error(out.vertices, out.triangles, truth.boundaries)
+    sharp = metrics3d.edge_sharpness(out.vertices, out.triangles)
     d = truth.diagonal / 100
     # None where the truth has no such feature (the metric would read 0 whatever the output).
     return {"chamfer": dist.chamfer / d, "hausdorff": dist.hausdorff / d,
             "crease": crease.mean / d if len(truth.creases) else None,
             "boundary": boundary.mean / d if len(truth.boundaries) else None, "seconds": out.seconds, "vertices": len(out.vertices),
+            # triangles on an edge that lie over another one there (0 on a mesh without folds)
+            "folded": int(np.sum(sharp.n_triangles - np.maximum(sharp.layers, 1))),
             "triangles": len(out.triangles), "note": out.note}
 
 
@@ -241,14 +246,15 @@ def render(path: Path, kind: Kind, points: np.ndarray, outputs: dict, rows: dict
 
 def markdown(rows: list[dict]) -> str:
     """The table: one row per input and method."""
-    lines = [("| input | method | vertices | triangles | Chamfer % D | Hausdorff % D | crease % D | boundary % D "
-              "| time s |"),
-             "| --- | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: |"]
+    lines = [("| input | method | vertices | triangles | folded | Chamfer % D | Hausdorff % D | crease % D "
+              "| boundary % D | time s |"),
+             "| --- | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |"]
     def cell(x):
         return "-" if x is None else f"{x:.3f}"
 
     for r in rows:
-        lines.append(f"| {r['kind']} | {r['method']} | {r['vertices']} | {r['triangles']} | {r['chamfer']:.3f} | "
+        lines.append(f"| {r['kind']} | {r['method']} | {r['vertices']} | {r['triangles']} | {r['folded']} | "
+                     f"{r['chamfer']:.3f} | "
                      f"{r['hausdorff']:.2f} | {cell(r['crease'])} | {cell(r['boundary'])} | {r['seconds']:.1f} |")
     return "\n".join(lines)
 

@@ -182,6 +182,61 @@ def test_a_folded_hinge_is_not_a_crease(opening):
     assert s3.angle[s3.n_triangles == 3][0] == pytest.approx(np.pi / 2 + opening, abs=1e-9)
 
 
+@pytest.mark.parametrize("opening", [0.0, 0.2, 0.5])
+def test_a_folded_hinge_ends_its_patch(opening):
+    # the two triangles double one patch: their shared edge is where it ends, a boundary edge
+    v, tri = hinge(opening, np.random.default_rng(8))
+    s = metrics3d.edge_sharpness(v, tri)
+    assert s.layers[s.n_triangles == 2].tolist() == [1]
+    assert metrics3d.boundary_error(v, tri, v[None, [0, 1]]).max < 1e-12
+    # a third triangle turned away from both closes it: two layers, not a boundary any more
+    v3 = np.vstack([v, v[0] - (v[2] - v[0])])
+    s3 = metrics3d.edge_sharpness(v3, np.vstack([tri, [[0, 1, 4]]]))
+    assert s3.layers[s3.n_triangles == 3].tolist() == [2]
+    assert metrics3d.boundary_error(v3, np.vstack([tri, [[0, 1, 4]]]), v[None, [0, 1]]).max > 0.1
+
+
+def test_an_open_hinge_has_two_layers():
+    v, tri = hinge(0.6, np.random.default_rng(9))
+    s = metrics3d.edge_sharpness(v, tri)
+    assert s.layers[s.n_triangles == 2].tolist() == [2] and np.all(s.layers[s.n_triangles == 1] == 1)
+
+
+@settings(max_examples=examples(100, 1000))
+@given(seed=st.integers(0, 2**32 - 1), n=st.integers(4, 30), fold=st.floats(0.0, 0.45))
+def test_layers_of_a_height_field(seed, n, fold):
+    """A graph ``z = f(x, y)`` with slopes at most 1 cannot fold (half planes
+    across an edge at least 90 degrees apart): its one-layer edges are its
+    one-triangle edges. A triangle folded onto a border triangle (``fold``
+    radians off it) keeps that border edge a boundary."""
+    from scipy.spatial import Delaunay
+
+    rng = np.random.default_rng(seed)
+    xy = rng.random((n, 2))
+    tri = Delaunay(xy).simplices
+    z = 0.3 * np.sin(3 * xy[:, 0] + rng.random()) * np.cos(2 * xy[:, 1])  # |grad z| <= 0.3 * sqrt(13) < 1.1
+    v = np.c_[xy, np.minimum(z, 0.7)]
+    q, _ = np.linalg.qr(rng.normal(size=(3, 3)))
+    v = v @ q.T + rng.normal(size=3)
+    s = metrics3d.edge_sharpness(v, tri)
+    assert np.array_equal(s.n_triangles, s.layers)
+    ones = s.edges[s.layers == 1]
+    assert np.array_equal(ones, metrics3d.boundary_edges(tri))
+    # fold a copy of one border triangle's far vertex about the border edge
+    a, b = ones[rng.integers(len(ones))]
+    c = next(int(t[(t != a) & (t != b)][0]) for t in tri if a in t and b in t)
+    axis = (v[b] - v[a]) / np.linalg.norm(v[b] - v[a])
+    w = v[c] - v[a]
+    w_along = (w @ axis) * axis
+    across = w - w_along
+    turned = np.cos(fold) * across + np.sin(fold) * np.cross(axis, across)
+    v2 = np.vstack([v, v[a] + w_along + turned])
+    tri2 = np.vstack([tri, [[a, b, len(v)]]])
+    s2 = metrics3d.edge_sharpness(v2, tri2)
+    k = np.flatnonzero((s2.edges[:, 0] == min(a, b)) & (s2.edges[:, 1] == max(a, b)))[0]
+    assert s2.n_triangles[k] == 2 and s2.layers[k] == 1
+
+
 def test_cube_and_crossing_creases():
     cube = cube_truth()
     s = metrics3d.edge_sharpness(cube.mesh.vertices, cube.mesh.triangles)
