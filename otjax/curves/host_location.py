@@ -17,10 +17,13 @@ from otjax.curves.location import locate_pairs
 from otjax.stencil import ragged_index
 
 
-def locate_on_host(batch: HostBatch, jobs: np.ndarray, points: np.ndarray, point_rows: np.ndarray) -> None:
+def locate_on_host(batch: HostBatch, jobs: np.ndarray, points: np.ndarray, point_rows: np.ndarray,
+                   min_pairs: int = LOCATE_MIN_PAIRS) -> None:
     """Locates the region points of ``jobs`` exactly, on the host.
 
-    Sets their ``row_cand`` and ``row_tri`` and clears ``row_locate``.
+    Sets their ``row_cand`` and ``row_tri`` and clears ``row_locate``;
+    ``min_pairs`` is :func:`~otjax.curves.location.locate_pairs`'s (the
+    locations do not depend on it).
 
     A guess first: the angular sector around the fan apex that the point
     falls in (one ``searchsorted`` for all jobs). The exact test confirms
@@ -43,16 +46,16 @@ def locate_on_host(batch: HostBatch, jobs: np.ndarray, points: np.ndarray, point
     lo, hi = batch.job_fan[pt_job], batch.job_fan[pt_job + 1] - 1
     g = np.clip(np.searchsorted(batch.fan_key, pt_job * 8.0 + phi, side="right") - 1, lo, hi)
     guess = batch.fan_tri[g]
-    ok = locate_pairs(batch.tri_xy[:, guess], point_rows[:, inside])
-    batch.located_by_kernel |= len(inside) >= LOCATE_MIN_PAIRS
+    ok = locate_pairs(batch.tri_xy[:, guess], point_rows[:, inside], min_pairs)
+    batch.located_by_kernel |= len(inside) >= min_pairs
     found = np.where(ok, guess, -1)
     rest = np.flatnonzero(~ok)
     if len(rest):
         job = pt_job[rest]
         pair_pt, k = ragged_index(n_tri[job])
         pair_tri = tri_start[job][pair_pt] + k
-        hold = locate_pairs(batch.tri_xy[:, pair_tri], point_rows[:, inside[rest[pair_pt]]])
-        batch.located_by_kernel |= len(pair_pt) >= LOCATE_MIN_PAIRS
+        hold = locate_pairs(batch.tri_xy[:, pair_tri], point_rows[:, inside[rest[pair_pt]]], min_pairs)
+        batch.located_by_kernel |= len(pair_pt) >= min_pairs
         hit = np.flatnonzero(hold)
         # The perturbed location is a partition: exactly one triangle each.
         if len(hit) != len(rest) or np.any(pair_pt[hit] != np.arange(len(rest))):

@@ -99,7 +99,7 @@ def _padding(size: int) -> tuple[np.ndarray, np.ndarray]:
     return tri, np.full((2, size), 2.0)
 
 
-def locate_pairs(tri: np.ndarray, p: np.ndarray) -> np.ndarray:
+def locate_pairs(tri: np.ndarray, p: np.ndarray, min_pairs: int = MIN_PAIRS) -> np.ndarray:
     """Exact perturbed point-in-triangle test for many pairs.
 
     Same answers as :func:`otjax.predicates.in_triangle_perturbed`,
@@ -111,6 +111,8 @@ def locate_pairs(tri: np.ndarray, p: np.ndarray) -> np.ndarray:
       tri: ``(6, N)`` float64 rows ``x0, y0, x1, y1, x2, y2`` of
         counter-clockwise triangles.
       p: ``(2, N)`` float64 query points, as rows.
+      min_pairs: fewer pairs than this go straight to the host predicate
+        (the answers do not depend on it).
 
     Returns:
       ``(N,)`` bool.
@@ -120,7 +122,7 @@ def locate_pairs(tri: np.ndarray, p: np.ndarray) -> np.ndarray:
     def exact(idx):
         return in_triangle_perturbed(tri[:, idx].T.reshape(-1, 3, 2), p[:, idx].T)
 
-    if n < MIN_PAIRS:
+    if n < min_pairs:
         return exact(np.arange(n))
     out = np.empty(n, np.int8)
     require_x64("exact point location")

@@ -19,6 +19,15 @@ from otjax.curves.host_location import keep_located, locate_on_host
 from otjax.curves.kernel_outputs import cut_outputs, read_costs
 from otjax.curves.stencils import CandidateCost
 
+# While the kernel keeps leaving rows unlocated (exactly collinear input),
+# batches are located on the host before their call instead of scored twice;
+# every PROBE-th such batch is left to the kernel to see whether that still
+# holds (docs/decisions.md#host_first).
+PROBE = 8
+# Host location of a whole batch tests its pairs on the host below this many
+# (above, the location kernel): the batches of a small run hold ~900 rows
+# (docs/decisions.md#host_first).
+HOST_FIRST_MIN_PAIRS = 1 << 12
 
 
 class Scorer:
@@ -29,6 +38,9 @@ class Scorer:
       mass: ``(n,)`` float64 masses.
       dtype: float dtype of the cost arithmetic (location is float64 whatever
         this is).
+
+    Which rows the kernel locates changes no score: a located row is the
+    exact perturbed location wherever it is found.
     """
 
     def __init__(self, points: np.ndarray, mass: np.ndarray, dtype=np.float64):
@@ -37,6 +49,9 @@ class Scorer:
         self.point_rows = np.ascontiguousarray(points.T)
         self.pipeline = KernelPipeline(scoring.FIELDS, scoring.score_packed, scoring.SHAPES, dtype)
         self.location_kernel_used = False
+        # Locate batches on the host before their call (see PROBE).
+        self.host_first = False
+        self._host_batches = 0
 
     @property
     def calls(self) -> int:
@@ -53,10 +68,20 @@ class Scorer:
         self.location_kernel_used |= batch.located_by_kernel
 
     def dispatch(self, batch: HostBatch) -> Handle | None:
-        """Pads and dispatches ``batch``; does not wait (``None`` if empty)."""
-        self.note(batch)
+        """Pads and dispatches ``batch``; does not wait (``None`` if empty).
+
+        With :attr:`host_first` on, the rows left for the kernel to locate
+        are located here first, except in every :data:`PROBE`-th batch.
+        """
         if not batch.cands:
+            self.note(batch)
             return None
+        if self.host_first and batch.row_locate.any():
+            self._host_batches += 1
+            if self._host_batches % PROBE:
+                locate_on_host(batch, np.arange(len(batch.row_start) - 1), self.points, self.point_rows,
+                               HOST_FIRST_MIN_PAIRS)
+        self.note(batch)
         return self.pipeline.dispatch(batch.values(self.points, self.mass), batch.need())
 
     def _wait(self, batch: HostBatch, handle: Handle) -> tuple:
@@ -68,12 +93,16 @@ class Scorer:
         Jobs with a row the kernel could not locate (its filter unsure:
         points on or within rounding of an edge, frequent on exactly
         collinear input) keep the rows it located, have the others located
-        on the host, and are scored again in a batch of their own.
+        on the host, and are scored again in a batch of their own. Whether
+        such rows turned up (in a batch the kernel located rows of) sets
+        :attr:`host_first`.
         """
         if handle is None:
             return np.zeros(0), []
         outputs = self._wait(batch, handle)
         bad = np.flatnonzero(outputs.unresolved)
+        if batch.row_locate.any():  # the kernel located rows: did its filter settle them all?
+            self.host_first = len(bad) > 0
         if not len(bad):
             return read_costs(batch, outputs)
         # The kernel costs an unlocated row on the edges of flat triangle 0

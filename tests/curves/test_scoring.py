@@ -17,6 +17,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from otjax.batch.fields import PackedBuffers
+from otjax.curves import scorer as scorer_module
 from otjax.curves import scoring
 from otjax.curves.batches import batch_of_located, located_jobs
 from otjax.curves.engine import CurveEngine
@@ -94,6 +95,42 @@ def test_fused_kernel_on_collinear_data_falls_back_exactly():
     for h, r in zip(located, costs):
         np.testing.assert_array_equal(r.triangle, h.triangle_of_point[:h.n_inside])
     assert_costs_match(cands, costs, padded_reference(engine, located))
+
+
+def _score_grid(sources_of):
+    pts = make_points("grid", 64, 0)
+    engine = CurveEngine(Triangulation(np.unique(pts, axis=0)), pts, np.ones(len(pts)))
+    calls = engine.scorer.calls
+    out = engine.score_batches(engine.exports(sources_of(engine), budget=1024))
+    return engine, engine.scorer.calls - calls, out
+
+
+def test_locating_on_the_host_first_changes_no_score(monkeypatch):
+    """Exactly collinear input: once the kernel leaves rows unlocated, later
+    batches are located on the host before their call (no second call), with
+    the scores of a run that always lets the kernel locate."""
+    def sources_of(engine):
+        return free_vertices(engine)
+
+    engine, calls, (cands, delta, costs) = _score_grid(sources_of)
+    assert engine.scorer.host_first
+    monkeypatch.setattr(scorer_module, "PROBE", 1)  # every batch a probe: the kernel locates them all
+    _, calls_kernel, (cands_k, delta_k, costs_k) = _score_grid(sources_of)
+    assert calls < calls_kernel  # fewer batches scored twice
+    assert [c.plan for c in cands] == [c.plan for c in cands_k]
+    np.testing.assert_array_equal(delta, delta_k)
+    for got, want in zip(costs, costs_k):
+        for name, value in want._asdict().items():
+            np.testing.assert_array_equal(getattr(got, name), value, err_msg=name)
+
+
+def test_host_first_turns_off_once_a_probe_batch_is_settled_by_the_kernel():
+    """A probe batch whose rows the kernel all located turns host location off."""
+    engine = make_engine(np.random.default_rng(3))  # noisy: the kernel's filter is sure
+    engine.scorer.host_first = True
+    sources = free_vertices(engine)
+    engine.score_batches(engine.exports(sources, budget=1024))
+    assert not engine.scorer.host_first
 
 
 def test_located_jobs_are_the_batch_of_their_located_candidates():
