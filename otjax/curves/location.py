@@ -30,16 +30,17 @@ INSIDE, OUTSIDE, UNSURE = 1, 0, -1
 # Pairs per kernel call: one size, one compiled shape. A chunk costs ~0.25 ms;
 # a small export pads to it, a large one dispatches several asynchronously.
 CHUNK = 1 << 14
-# Fewer pairs than this go straight to the host predicate (below the cost of
-# one kernel call).
+# Fewer pairs than this are tested on the host, the filter in NumPy (below
+# the cost of one kernel call).
 MIN_PAIRS = 512
 
 
-def _orient_perturbed_filtered(ax, ay, bx, by, px, py) -> tuple[jax.Array, jax.Array]:
+def _orient_perturbed_filtered(ax, ay, bx, by, px, py, xp=jnp) -> tuple[jax.Array, jax.Array]:
     """Sign of ``orient(a, b, p + eps (1, eps))`` where the float filter is sure.
 
     Args:
       ax, ay, bx, by, px, py: ``(N,)`` float64 coordinates.
+      xp: the array module (``jax.numpy`` in kernels, ``numpy`` on the host).
 
     Returns:
       ``(positive, negative)`` ``(N,)`` bool; both False when the float
@@ -49,35 +50,36 @@ def _orient_perturbed_filtered(ax, ay, bx, by, px, py) -> tuple[jax.Array, jax.A
     left = (bx - ax) * (py - ay)
     right = (by - ay) * (px - ax)
     det = left - right
-    sure = jnp.abs(det) > ORIENT_ERR * (jnp.abs(left) + jnp.abs(right))
+    sure = xp.abs(det) > ORIENT_ERR * (xp.abs(left) + xp.abs(right))
     # Both products exactly zero (an exactly-zero factor each), or p == b:
     # det is 0 and the perturbation decides, by exact comparisons, as on the
     # host: the sign of a_y - b_y, else of b_x - a_x.
     zero = (((bx == ax) | (py == ay)) & ((by == ay) | (px == ax))) | ((px == bx) & (py == by))
-    up = jnp.where(ay != by, ay > by, bx > ax)
-    down = jnp.where(ay != by, ay < by, bx < ax)
-    positive = jnp.where(zero, up, sure & (det > 0))
-    negative = jnp.where(zero, down, sure & (det < 0))
+    up = xp.where(ay != by, ay > by, bx > ax)
+    down = xp.where(ay != by, ay < by, bx < ax)
+    positive = xp.where(zero, up, sure & (det > 0))
+    negative = xp.where(zero, down, sure & (det < 0))
     return positive, negative
 
 
-def in_triangle_rows(tri, px, py) -> jax.Array:
+def in_triangle_rows(tri, px, py, xp=jnp) -> jax.Array:
     """Filtered perturbed point-in-triangle test on coordinate rows.
 
     Args:
       tri: ``(6, ...)`` float64 rows ``x0, y0, x1, y1, x2, y2`` of
         counter-clockwise triangles.
       px, py: ``(...)`` float64 coordinates of the query points.
+      xp: the array module (``jax.numpy`` in kernels, ``numpy`` on the host).
 
     Returns:
       ``(...)`` int8: :data:`INSIDE`, :data:`OUTSIDE` or :data:`UNSURE`. A
       pair is outside as soon as one edge is surely on the wrong side.
     """
     x0, y0, x1, y1, x2, y2 = tri
-    p0, n0 = _orient_perturbed_filtered(x0, y0, x1, y1, px, py)
-    p1, n1 = _orient_perturbed_filtered(x1, y1, x2, y2, px, py)
-    p2, n2 = _orient_perturbed_filtered(x2, y2, x0, y0, px, py)
-    return jnp.where(n0 | n1 | n2, OUTSIDE, jnp.where(p0 & p1 & p2, INSIDE, UNSURE)).astype(jnp.int8)
+    p0, n0 = _orient_perturbed_filtered(x0, y0, x1, y1, px, py, xp)
+    p1, n1 = _orient_perturbed_filtered(x1, y1, x2, y2, px, py, xp)
+    p2, n2 = _orient_perturbed_filtered(x2, y2, x0, y0, px, py, xp)
+    return xp.where(n0 | n1 | n2, OUTSIDE, xp.where(p0 & p1 & p2, INSIDE, UNSURE)).astype(xp.int8)
 
 
 @jax.jit
@@ -103,9 +105,10 @@ def locate_pairs(tri: np.ndarray, p: np.ndarray, min_pairs: int = MIN_PAIRS) -> 
     """Exact perturbed point-in-triangle test for many pairs.
 
     Same answers as :func:`otjax.predicates.in_triangle_perturbed`,
-    computed by the filtered kernel in fixed-size chunks; the unsure pairs
-    (a handful on noisy data, more on exactly collinear data) go to the exact
-    host predicate.
+    computed by the filtered kernel in fixed-size chunks (below
+    ``min_pairs``, by the same filter in NumPy); the unsure pairs (a handful
+    on noisy data, more on exactly collinear data) go to the exact host
+    predicate.
 
     Args:
       tri: ``(6, N)`` float64 rows ``x0, y0, x1, y1, x2, y2`` of
@@ -123,20 +126,23 @@ def locate_pairs(tri: np.ndarray, p: np.ndarray, min_pairs: int = MIN_PAIRS) -> 
         return in_triangle_perturbed(tri[:, idx].T.reshape(-1, 3, 2), p[:, idx].T)
 
     if n < min_pairs:
-        return exact(np.arange(n))
-    out = np.empty(n, np.int8)
-    require_x64("exact point location")
-    pending = []
-    for s in range(0, n, CHUNK):
-        t, q = tri[:, s:s + CHUNK], p[:, s:s + CHUNK]
-        if q.shape[1] < CHUNK:
-            pad_t, pad_q = _padding(CHUNK)
-            t = np.concatenate([t, pad_t[:, q.shape[1]:]], 1)
-            q = np.concatenate([q, pad_q[:, q.shape[1]:]], 1)
-        pending.append((s, in_triangle_filtered(t, q)))  # dispatched asynchronously
-    for s, res in pending:
-        res = np.asarray(res)
-        out[s:s + len(res)] = res[: n - s]
+        # The kernel's filter in NumPy, on the rows as they are: cheaper than
+        # the exact predicate's (N, 3, 2) layout on every pair.
+        out = in_triangle_rows(tri, p[0], p[1], np)
+    else:
+        out = np.empty(n, np.int8)
+        require_x64("exact point location")
+        pending = []
+        for s in range(0, n, CHUNK):
+            t, q = tri[:, s:s + CHUNK], p[:, s:s + CHUNK]
+            if q.shape[1] < CHUNK:
+                pad_t, pad_q = _padding(CHUNK)
+                t = np.concatenate([t, pad_t[:, q.shape[1]:]], 1)
+                q = np.concatenate([q, pad_q[:, q.shape[1]:]], 1)
+            pending.append((s, in_triangle_filtered(t, q)))  # dispatched asynchronously
+        for s, res in pending:
+            res = np.asarray(res)
+            out[s:s + len(res)] = res[: n - s]
     hold = out == INSIDE
     unsure = np.flatnonzero(out == UNSURE)
     if len(unsure):

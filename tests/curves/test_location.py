@@ -39,6 +39,9 @@ def test_filtered_location_equals_the_exact_predicate(kind, n, seed):
     want = in_triangle_perturbed(a, p)
     got = locate_pairs(*rows(a, p))
     np.testing.assert_array_equal(got, want)
+    # Both paths whatever the size: the filter in the kernel, in NumPy.
+    np.testing.assert_array_equal(locate_pairs(*rows(a, p), min_pairs=0), want)
+    np.testing.assert_array_equal(locate_pairs(*rows(a, p), min_pairs=len(p) + 1), want)
     # Each query is in exactly one triangle.
     assert np.all(got.reshape(len(queries), -1).sum(1) == 1)
 
