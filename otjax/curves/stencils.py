@@ -138,8 +138,25 @@ def triangle_edges(tris: np.ndarray) -> np.ndarray:
     return np.sort(np.stack([tris, tris[:, [1, 2, 0]]], -1), -1)
 
 
+class PlanEntry(NamedTuple):
+    """A cached collapse plan of a half-edge, valid while both star versions hold.
+
+    Attributes:
+      source_stamp, target_stamp: the star versions of its two ends it was made at.
+      flips: its ``Flips``, or ``None`` when the collapse cannot be planned.
+      plan: its ``CollapsePlan``, or ``None`` (no flips, or the link condition fails).
+      new_triangles: ``(T, 3)`` int64 triangles the collapse makes, or ``None`` with ``plan``.
+    """
+
+    source_stamp: int
+    target_stamp: int
+    flips: object
+    plan: CollapsePlan | None
+    new_triangles: np.ndarray | None
+
+
 def _plan_entry(tri, source: int, target: int, stamps: tuple[int, int], flips, old_plan=None,
-                old_triangles=None) -> tuple:
+                old_triangles=None) -> PlanEntry:
     """The cache entry of a half-edge whose flips are ``flips``, at the star
     versions ``stamps`` (see :meth:`StencilCache._plan_entries`).
 
@@ -148,13 +165,13 @@ def _plan_entry(tri, source: int, target: int, stamps: tuple[int, int], flips, o
     compared by identity first), while the link condition holds.
     """
     if flips is None:
-        return (*stamps, None, None, None)
+        return PlanEntry(*stamps, None, None, None)
     if old_plan is not None:
         if link_condition(tri, target, flips):
-            return (*stamps, flips, old_plan, old_triangles)
-        return (*stamps, flips, None, None)
+            return PlanEntry(*stamps, flips, old_plan, old_triangles)
+        return PlanEntry(*stamps, flips, None, None)
     plan = plan_from_flips(tri, source, target, flips)
-    return (*stamps, flips, plan, None if plan is None else np.asarray(plan.new_triangles, np.int64))
+    return PlanEntry(*stamps, flips, plan, None if plan is None else np.asarray(plan.new_triangles, np.int64))
 
 
 class StencilCache:
@@ -173,8 +190,8 @@ class StencilCache:
         self.log = log
         self.max_source_degree = max_source_degree
         self._regions: dict[int, tuple[int, Region]] = {}
-        # {source: {target: _plan_entry}}
-        self._plans: dict[int, dict[int, tuple]] = {}
+        # {source: {target: PlanEntry}}
+        self._plans: dict[int, dict[int, PlanEntry]] = {}
 
     def forget(self, v: int) -> None:
         """Drops the region and plans of a removed vertex (memory only:
@@ -188,12 +205,11 @@ class StencilCache:
         Its flips depend on the source's star alone: a change of the
         target's star only asks for the link condition again.
         """
-        return self._plan_entries(source, (target,))[0][3]
+        return self._plan_entries(source, (target,))[0].plan
 
-    def _plan_entries(self, source: int, targets) -> list[tuple]:
-        """``(source's star version, target's, Flips | None, CollapsePlan |
-        None, (T, 3) int64 new triangles | None)`` of the half-edge from
-        ``source`` to each of ``targets``, current. The flips not at hand are
+    def _plan_entries(self, source: int, targets) -> list[PlanEntry]:
+        """The current :class:`PlanEntry` of the half-edge from ``source`` to
+        each of ``targets``. The flips not at hand are
         planned together (:func:`~otjax.curves.collapse.plan_flips_from`)."""
         sv = self.log.star_version
         s_stamp = sv[source]
@@ -205,13 +221,14 @@ class StencilCache:
         missing: list[int] = []
         for target in targets:
             hit = plans.get(target)
-            if hit is None or hit[0] != s_stamp:
+            if hit is None or hit.source_stamp != s_stamp:
                 missing.append(len(out))
                 out.append(None)
                 continue
             t_stamp = sv[target]
-            if hit[1] != t_stamp:
-                hit = plans[target] = _plan_entry(tri, source, target, (s_stamp, t_stamp), *hit[2:])
+            if hit.target_stamp != t_stamp:
+                hit = plans[target] = _plan_entry(tri, source, target, (s_stamp, t_stamp), hit.flips, hit.plan,
+                                                  hit.new_triangles)
             out.append(hit)
         if missing:
             wanted = [targets[i] for i in missing]
@@ -279,8 +296,8 @@ class StencilCache:
                 allowed = set(targets[v])
                 wanted = [w for w in region.ring if w in allowed]
             for entry in self._plan_entries(v, wanted):
-                if entry[3] is not None:
-                    jobs.append(Job(entry[3], entry[4], region, None, None))
+                if entry.plan is not None:
+                    jobs.append(Job(entry.plan, entry.new_triangles, region, None, None))
         return jobs
 
     def move_jobs(self, moves):
