@@ -1,7 +1,7 @@
 """otjax's surface reconstruction against screened Poisson + QEM decimation,
 on the same generated inputs, to the same vertex budget, in one run.
 
-Inputs (:mod:`otjax.datasets3d`, one seed): a staircase without noise and
+Inputs (:mod:`otjax.datasets3d`, one per seed of ``--seeds``): a staircase without noise and
 with Gaussian noise of 1% of the bounding-box diagonal D, an open cylinder
 with 10% uniform outliers, two crossing squares, the cube. Each goes through
 
@@ -22,7 +22,9 @@ Hausdorff distance (:func:`otjax.metrics3d.surface_distances`), crease error
 boundary edges, a fold's two triangles counted as one sheet); "folded", the
 triangles lying over another on one of their edges (0 on a mesh without
 folds); and the wall time of each method. It prints a markdown
-table; ``--json`` writes every number, ``--renders DIR`` one PNG per input
+table of the means over the seeds (Poisson + QEM is not deterministic:
+means over seeds compare better than one run); ``--json`` writes every
+run's numbers, ``--renders DIR`` one PNG per input of the first seed
 (points, otjax, Poisson + QEM side by side).
 
 Open3D and pymeshlab are the optional extra ``compare``
@@ -244,8 +246,26 @@ def render(path: Path, kind: Kind, points: np.ndarray, outputs: dict, rows: dict
     plt.close(fig)
 
 
+MEAN_FIELDS = ("vertices", "triangles", "folded", "chamfer", "hausdorff", "crease", "boundary", "seconds")
+
+
+def mean_rows(rows: list[dict]) -> list[dict]:
+    """One row per input and method (first-seen order): the mean of each of
+    :data:`MEAN_FIELDS` over its seeds (``None`` stays ``None``), ``seeds`` their count."""
+    groups: dict = {}
+    for r in rows:
+        groups.setdefault((r["kind"], r["method"]), []).append(r)
+    out = []
+    for (kind, method), rs in groups.items():
+        row = {"kind": kind, "method": method, "seeds": len(rs)}
+        for f in MEAN_FIELDS:
+            row[f] = None if rs[0][f] is None else float(np.mean([r[f] for r in rs]))
+        out.append(row)
+    return out
+
+
 def markdown(rows: list[dict]) -> str:
-    """The table: one row per input and method."""
+    """The table: one row per input and method (means over seeds)."""
     lines = [("| input | method | vertices | triangles | folded | Chamfer % D | Hausdorff % D | crease % D "
               "| boundary % D | time s |"),
              "| --- | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |"]
@@ -253,7 +273,7 @@ def markdown(rows: list[dict]) -> str:
         return "-" if x is None else f"{x:.3f}"
 
     for r in rows:
-        lines.append(f"| {r['kind']} | {r['method']} | {r['vertices']} | {r['triangles']} | {r['folded']} | "
+        lines.append(f"| {r['kind']} | {r['method']} | {r['vertices']:.0f} | {r['triangles']:.0f} | {r['folded']:.0f} | "
                      f"{r['chamfer']:.3f} | "
                      f"{r['hausdorff']:.2f} | {cell(r['crease'])} | {cell(r['boundary'])} | {r['seconds']:.1f} |")
     return "\n".join(lines)
@@ -266,7 +286,7 @@ def parse(argv=None) -> argparse.Namespace:
     p.add_argument("--vertices", type=int, default=100, help="vertex budget of both methods")
     p.add_argument("--kinds", nargs="+", choices=[k.name for k in KINDS], default=[k.name for k in KINDS])
     p.add_argument("--methods", nargs="+", choices=METHODS, default=list(METHODS))
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seeds", type=int, nargs="+", default=[0], help="one input of each kind per seed")
     p.add_argument("--density-threshold", type=float, default=0.1,
                    help="otjax: drop facets below this multiple of the mean density (0: keep all with mass)")
     p.add_argument("--bin-density", type=float, help="otjax: facet bins per squared diagonal (default: its own)")
@@ -297,22 +317,24 @@ def main(argv=None) -> int:
         args.renders.mkdir(parents=True, exist_ok=True)
     rows = []
     for kind in (k for k in KINDS if k.name in args.kinds):
-        points, truth = generate(kind, args.points, args.seed)
-        outputs, by_method = {}, {}
-        for method in args.methods:
-            if method == "otjax":
-                out = run_otjax(points, args.vertices, args.density_threshold, args.seed, args.bin_density)
-            else:
-                out = run_poisson(o3d, pymeshlab, points, args.vertices, args.depth, args.trim, args.neighbours)
-            outputs[method] = out
-            row = {"kind": kind.name, "describe": kind.describe, "points": len(points), "method": method,
-                   **measure(out, truth, args.samples)}
-            by_method[method] = row
-            rows.append(row)
-            print(f"{kind.name:18s} {method:8s} {row['seconds']:7.1f} s  {out.note}", file=sys.stderr, flush=True)
-        if args.renders:
-            render(args.renders / f"{kind.name}.png", kind, points, outputs, by_method)
-    print(markdown(rows))
+        for seed in args.seeds:
+            points, truth = generate(kind, args.points, seed)
+            outputs, by_method = {}, {}
+            for method in args.methods:
+                if method == "otjax":
+                    out = run_otjax(points, args.vertices, args.density_threshold, seed, args.bin_density)
+                else:
+                    out = run_poisson(o3d, pymeshlab, points, args.vertices, args.depth, args.trim, args.neighbours)
+                outputs[method] = out
+                row = {"kind": kind.name, "describe": kind.describe, "seed": seed, "points": len(points),
+                       "method": method, **measure(out, truth, args.samples)}
+                by_method[method] = row
+                rows.append(row)
+                print(f"{kind.name:18s} seed {seed} {method:8s} {row['seconds']:7.1f} s  {out.note}", file=sys.stderr,
+                      flush=True)
+            if args.renders and seed == args.seeds[0]:
+                render(args.renders / f"{kind.name}.png", kind, points, outputs, by_method)
+    print(markdown(mean_rows(rows)))
     if args.json:
         info = {"command": "python scripts/compare_surfaces.py " + " ".join(sys.argv[1:] if argv is None else argv),
                 "machine": {"python": platform.python_version(), "machine": platform.machine(),
