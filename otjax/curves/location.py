@@ -114,8 +114,8 @@ def locate_pairs(tri: np.ndarray, p: np.ndarray, min_pairs: int = MIN_PAIRS) -> 
       tri: ``(6, N)`` float64 rows ``x0, y0, x1, y1, x2, y2`` of
         counter-clockwise triangles.
       p: ``(2, N)`` float64 query points, as rows.
-      min_pairs: fewer pairs than this go straight to the host predicate
-        (the answers do not depend on it).
+      min_pairs: below this many pairs the filter runs in NumPy instead of
+        the kernel (the answers do not depend on it).
 
     Returns:
       ``(N,)`` bool.
