@@ -68,6 +68,22 @@ class CollapseChange(NamedTuple):
     merged_triangles: tuple[Triangle, ...]
 
 
+class SplitChange(NamedTuple):
+    """What splitting an edge at a vertex did (:meth:`SimplicialComplex.split_edge`).
+
+    Attributes:
+      edge: the edge ``(a, b)`` that was split; it no longer exists.
+      vertex: the vertex it was split at.
+      removed_triangles: the triangles on the edge, all gone.
+      added_triangles: their halves that did not exist before.
+    """
+
+    edge: Edge
+    vertex: int
+    removed_triangles: tuple[Triangle, ...]
+    added_triangles: tuple[Triangle, ...]
+
+
 class ComplexArrays(NamedTuple):
     """The live complex as compact arrays (ids renumbered ``0 .. V-1``).
 
@@ -292,6 +308,33 @@ class SimplicialComplex:
         added_e, merged_e = self._add_images(removed_e, source, target)
         added_t, merged_t = self._add_images(removed_t, source, target)
         return CollapseChange(source, target, removed_e, removed_t, added_e, added_t, merged_e, merged_t)
+
+    def split_edge(self, a: int, b: int, v: int) -> SplitChange:
+        """Splits the edge ``(a, b)`` at ``v``, a vertex joined to both ends.
+
+        Each triangle ``(a, b, c)`` with ``c != v`` becomes ``(a, v, c)`` and
+        ``(v, b, c)`` (merging with any that exist), the triangle ``(a, b, v)``
+        goes, and so does the edge, which ``(a, v)`` and ``(v, b)`` replace.
+        Where ``v`` lies on the segment this changes the topology only: it
+        joins the facets on ``(a, b)`` to those around ``v``.
+
+        Raises:
+          ValueError: no edge ``(a, b)``, or ``v`` not joined to both ends.
+        """
+        e = edge_key(a, b)
+        if e not in self.edges or v in e or not (self.has_edge(a, v) and self.has_edge(v, b)):
+            raise ValueError(f"cannot split edge ({a}, {b}) at {v}: it needs the edges ({a}, {b}), "
+                             f"({a}, {v}) and ({v}, {b})")
+        removed = tuple(sorted(self.edges[e]))
+        for t in removed:
+            self._remove_triangle(t)
+        self._remove_edge(e)
+        added = []
+        for t in removed:
+            (c,) = set(t) - {a, b}
+            if c != v:
+                added += [h for h in (triangle_key(a, v, c), triangle_key(v, b, c)) if self._add_triangle(h)]
+        return SplitChange(e, v, removed, tuple(sorted(added)))
 
     def move(self, v: int, position: np.ndarray) -> None:
         """Sets the position of live vertex ``v`` (topology is unchanged)."""

@@ -4,9 +4,9 @@ Points -> canonical frame -> initial complex (Delaunay of a subset, relaxed
 transport, facets with mass; §4.1) -> (re-binned) -> greedy half-edge
 collapses by increase of transport cost (§4.2, the shared loop of
 :mod:`otjax.decimation`), relocating the remaining vertex and its
-neighbours after each of the last collapses (§4.3) -> the final complex
-re-binned at a finer quadrature -> relocation passes over every vertex ->
-arrays in the input's units.
+neighbours after each of the last collapses (§4.3) -> T-junctions closed
+-> the final complex re-binned at a finer quadrature -> relocation passes
+over every vertex -> arrays in the input's units.
 """
 
 from __future__ import annotations
@@ -28,6 +28,7 @@ from otjax.surfaces.plan import BinSettings, Entries, SurfacePlan
 from otjax.surfaces.relaxation import relax
 from otjax.surfaces.result import SurfaceResult
 from otjax.surfaces.solvers import LocalSolver, default_solver
+from otjax.surfaces.t_junctions import close_t_junctions
 from otjax.validation import check_number, check_points, check_target
 
 SOLVERS = ("batched", "exact")
@@ -165,7 +166,7 @@ def reconstruct_surface(points, masses=None, n_vertices: int = 100, *, queue: st
         stats = decimate(engine, n_vertices, queue=queue, choices=choices, switch_factor=switch_factor, seed=seed,
                          relocation=every if relocation is None else relocation, progress=progress)
         seconds.lap("decimation")
-        engine = _finer(engine, final_density_factor, method)
+        engine = _finer(engine, final_density_factor, method, changed=close_t_junctions(engine.plan) > 0)
         seconds.lap("final_rebin")
         stats.relocations += _final_passes(engine, final_relocations)
         seconds.lap("final_relocation")
@@ -196,10 +197,11 @@ class _Laps(dict):
         self[name], self._since = now - self._since, now
 
 
-def _finer(engine: SurfaceEngine, factor: float, method: str) -> SurfaceEngine:
-    """The engine on the plan re-binned at ``factor`` times its density (the
-    same engine where ``factor`` is 1)."""
-    if factor == 1:
+def _finer(engine: SurfaceEngine, factor: float, method: str, changed: bool) -> SurfaceEngine:
+    """The engine on the plan re-binned at ``factor`` times its density and
+    relaxed (the same engine where ``factor`` is 1 and the complex has not
+    ``changed`` since the engine was made)."""
+    if factor == 1 and not changed:
         return engine
     plan = engine.plan
     settings = plan.settings._replace(density=plan.settings.density * factor)

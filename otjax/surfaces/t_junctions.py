@@ -1,0 +1,130 @@
+"""T-junctions left by the decimation, and closing them.
+
+Half-edge collapses on a non-manifold complex can leave two sheets that
+meet along a line without sharing its edges: one ends on an edge ``(a, b)``,
+the other on two edges ``(a, v)`` and ``(v, b)`` with ``v`` on the segment
+``ab``. No edge then carries both sheets, so the line is a crack rather
+than a crease, however close the vertices lie to it. Closing a T-junction
+splits every facet ``(a, b, c)`` of that edge at ``v`` into ``(a, v, c)`` and
+``(v, b, c)`` (:meth:`~otjax.surfaces.complex.SimplicialComplex.split_edge`):
+where ``v`` is on the segment, the surface is the same and the sheets share
+the edges ``(a, v)`` and ``(v, b)`` (docs/decisions.md#t_junctions).
+
+The transport plan follows: a split facet's mass goes to the half its bin
+lies in, spread over that half's bins by capacity, which keeps the plan
+feasible; the mass of a dropped sliver ``(a, v, b)`` goes to the nearest of
+its vertices. The caller re-bins and relaxes the plan afterwards.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+
+from otjax.surfaces.complex import SimplicialComplex
+from otjax.surfaces.plan import Entries, SurfacePlan
+
+#: ``v`` lies on ``ab`` when the angle ``a v b`` is at least 180 degrees minus this.
+T_JUNCTION_ANGLE = 20.0
+#: Rounds of :func:`close_t_junctions` at most: a split adds edges, which in
+#: a complex that is not embedded can make new T-junctions, even cycles.
+MAX_ROUNDS = 8
+
+
+class TJunction(NamedTuple):
+    """A vertex ``v`` joined to both ends of the edge ``(a, b)``, lying on it,
+    and not a corner of every facet of that edge."""
+
+    a: int
+    b: int
+    v: int
+
+
+def find_t_junctions(complex_: SimplicialComplex, angle: float = T_JUNCTION_ANGLE) -> list[TJunction]:
+    """The T-junctions of ``complex_``, one per edge (the ``v`` of the widest
+    angle ``a v b``, ties by id), in edge order. ``angle`` in degrees."""
+    x = complex_.positions
+    found = []
+    for (a, b), facets in sorted(complex_.edges.items()):
+        common = set(complex_.neighbors(a)) & set(complex_.neighbors(b))
+        open_ = sorted(v for v in common if any(v not in t for t in facets))
+        if open_:
+            u, w = x[a] - x[open_], x[b] - x[open_]
+            cos = np.einsum("ij,ij->i", u, w) / (np.linalg.norm(u, axis=1) * np.linalg.norm(w, axis=1))
+            j = TJunction(a, b, open_[int(np.argmin(cos))])
+            if is_t_junction(complex_, j, angle):
+                found.append(j)
+    return found
+
+
+def is_t_junction(complex_: SimplicialComplex, j: TJunction, angle: float = T_JUNCTION_ANGLE) -> bool:
+    """Whether ``v`` is joined to both ends of the edge ``(a, b)``, is not a
+    corner of one of its facets at least, and sees ``ab`` under an angle of at
+    least ``180 - angle`` degrees."""
+    c = complex_
+    if not (c.has_edge(j.a, j.b) and c.has_edge(j.a, j.v) and c.has_edge(j.v, j.b)):
+        return False
+    if all(j.v in t for t in c.edge_triangles(j.a, j.b)):
+        return False
+    u, w = c.positions[j.a] - c.positions[j.v], c.positions[j.b] - c.positions[j.v]
+    return bool(u @ w <= -np.cos(np.radians(angle)) * np.linalg.norm(u) * np.linalg.norm(w))
+
+
+def close_t_junctions(plan: SurfacePlan, angle: float = T_JUNCTION_ANGLE) -> int:
+    """Closes the T-junctions of ``plan.complex`` in place (module doc),
+    moving the plan's entries with the facets, in rounds (each closes those
+    found at its start) until none is left or after :data:`MAX_ROUNDS`;
+    returns how many edges were split."""
+    splits = 0
+    for _ in range(MAX_ROUNDS):
+        todo = find_t_junctions(plan.complex, angle)
+        if not todo:
+            break
+        for j in todo:
+            if is_t_junction(plan.complex, j, angle):  # an earlier split of the round may have undone it
+                _split(plan, j)
+                splits += 1
+    return splits
+
+
+def _split(plan: SurfacePlan, j: TJunction) -> None:
+    """Splits ``(a, b)`` at ``v`` and hands each removed facet's entries on."""
+    x = plan.complex.positions
+    old_bins = {t: plan.bins.pop(t) for t in plan.complex.edge_triangles(j.a, j.b)}
+    change = plan.complex.split_edge(j.a, j.b, j.v)
+    plan.ensure_bins(change.added_triangles)
+    ab = x[j.b] - x[j.a]
+    at = float((x[j.v] - x[j.a]) @ ab / (ab @ ab))  # where v falls along ab
+    for t in change.removed_triangles:
+        e = plan.facet_entries.pop(t, None)
+        if e is None:
+            continue
+        lam = old_bins[t].barycentric[e.bin]  # weights of t's corners, in key order
+        (c,) = set(t) - {j.a, j.b}
+        if c == j.v:  # the sliver (a, v, b): to the nearest of its corners
+            pos = lam @ x[list(t)]
+            corner = np.asarray(t)[np.argmin(((pos[:, None] - x[list(t)][None]) ** 2).sum(-1), axis=1)]
+            for v in np.unique(corner):
+                pick = corner == v
+                _add(plan.vertex_entries, int(v), e.point[pick], np.zeros(pick.sum(), np.int64), e.mass[pick])
+            continue
+        wa, wb = lam[:, t.index(j.a)], lam[:, t.index(j.b)]
+        low = wb < at * (wa + wb)  # on a's side of the segment (v, c)
+        for half, pick in (((j.a, j.v, c), low), ((j.v, j.b, c), ~low)):
+            key = tuple(sorted(half))
+            cap = plan.bins[key].capacity
+            k = len(cap)
+            _add(plan.facet_entries, key, np.repeat(e.point[pick], k), np.tile(np.arange(k), int(pick.sum())),
+                 np.outer(e.mass[pick], cap).ravel())
+
+
+def _add(entries: dict, key, point: np.ndarray, bin_: np.ndarray, mass: np.ndarray) -> None:
+    """Adds entries to ``entries[key]``, summing the mass of repeated (point, bin) pairs."""
+    if not len(point):
+        return
+    old = entries.get(key)
+    if old is not None:
+        point, bin_, mass = (np.concatenate([o, n]) for o, n in zip(old, (point, bin_, mass)))
+    pairs, inverse = np.unique(np.stack([point, bin_], axis=1), axis=0, return_inverse=True)
+    entries[key] = Entries(pairs[:, 0].copy(), pairs[:, 1].copy(), np.bincount(inverse.ravel(), mass))
