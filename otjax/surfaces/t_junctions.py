@@ -8,7 +8,8 @@ than a crease, however close the vertices lie to it. Closing a T-junction
 splits every facet ``(a, b, c)`` of that edge at ``v`` into ``(a, v, c)`` and
 ``(v, b, c)`` (:meth:`~otjax.surfaces.complex.SimplicialComplex.split_edge`):
 where ``v`` is on the segment, the surface is the same and the sheets share
-the edges ``(a, v)`` and ``(v, b)`` (docs/decisions.md#t_junctions).
+the edges ``(a, v)`` and ``(v, b)``. A split that would make a sliver is
+not made (:func:`is_t_junction`; docs/decisions.md#t_junctions).
 
 The transport plan follows: a split facet's mass goes to the half its bin
 lies in, spread over that half's bins by capacity, which keeps the plan
@@ -26,7 +27,7 @@ from otjax.surfaces.complex import SimplicialComplex
 from otjax.surfaces.plan import Entries, SurfacePlan
 
 #: ``v`` lies on ``ab`` when the angle ``a v b`` is at least 180 degrees minus this.
-T_JUNCTION_ANGLE = 20.0
+T_JUNCTION_ANGLE = 5.0
 #: Rounds of :func:`close_t_junctions` at most: a split adds edges, which in
 #: a complex that is not embedded can make new T-junctions, even cycles.
 MAX_ROUNDS = 8
@@ -60,14 +61,27 @@ def find_t_junctions(complex_: SimplicialComplex, angle: float = T_JUNCTION_ANGL
 
 def is_t_junction(complex_: SimplicialComplex, j: TJunction, angle: float = T_JUNCTION_ANGLE) -> bool:
     """Whether ``v`` is joined to both ends of the edge ``(a, b)``, is not a
-    corner of one of its facets at least, and sees ``ab`` under an angle of at
-    least ``180 - angle`` degrees."""
+    corner of one of its facets at least, sees ``ab`` under an angle of at
+    least ``180 - angle`` degrees, and splitting there makes no sliver (a
+    half with such an angle itself, as when the facet's third corner is on
+    the line too): those stay, since splitting them could undo another split."""
     c = complex_
     if not (c.has_edge(j.a, j.b) and c.has_edge(j.a, j.v) and c.has_edge(j.v, j.b)):
         return False
-    if all(j.v in t for t in c.edge_triangles(j.a, j.b)):
+    facets = [t for t in c.edge_triangles(j.a, j.b) if j.v not in t]
+    if not facets or not _flat(c.positions, j.a, j.v, j.b, angle):
         return False
-    u, w = c.positions[j.a] - c.positions[j.v], c.positions[j.b] - c.positions[j.v]
+    for t in facets:
+        (o,) = set(t) - {j.a, j.b}
+        for half in ((j.a, j.v, o), (j.v, j.b, o)):
+            if any(_flat(c.positions, half[k - 1], half[k], half[(k + 1) % 3], angle) for k in range(3)):
+                return False
+    return True
+
+
+def _flat(x: np.ndarray, a: int, v: int, b: int, angle: float) -> bool:
+    """Whether the angle ``a v b`` is at least ``180 - angle`` degrees (or undefined)."""
+    u, w = x[a] - x[v], x[b] - x[v]
     return bool(u @ w <= -np.cos(np.radians(angle)) * np.linalg.norm(u) * np.linalg.norm(w))
 
 

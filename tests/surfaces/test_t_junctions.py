@@ -80,8 +80,8 @@ def test_a_cracked_cube_edge_is_found_and_closed_into_a_crease():
 
 
 def test_a_vertex_off_the_segment_is_no_t_junction():
-    assert find_t_junctions(cracked_cube_edge(offset=0.05)) == [TJunction(0, 1, 2)]  # 169 degrees
-    assert find_t_junctions(cracked_cube_edge(offset=0.25)) == []  # 127 degrees
+    assert find_t_junctions(cracked_cube_edge(offset=0.02)) == [TJunction(0, 1, 2)]  # 175.4 degrees
+    assert find_t_junctions(cracked_cube_edge(offset=0.05)) == []  # 168.6 degrees
     assert find_t_junctions(cracked_cube_edge(offset=0.25), angle=60.0) == [TJunction(0, 1, 2)]
 
 
