@@ -10,8 +10,13 @@ probability that point ``i`` is background is ``min(1, beta / rho_i)``.
 box filled uniformly, it is repeatedly replaced by the median density of
 the points below twice it, which settles on the lowest dense level of
 the data. That level is background only if it explains about as many
-points as it predicts over the box (``beta * volume``) and if those points
-fill space: the number of neighbours within ``r`` of them grows as ``r^d``
+points as it predicts where it is the density seen: random probes spread
+uniformly over the box, their k-nearest-neighbour density taken among the
+points, measure the share of the box where a probe would read below the
+same cut, and background of density ``beta`` puts ``beta * volume * share``
+points there (near a shape that fills its box, an outlier's neighbours are
+the shape's points, so it reads denser: counting against the whole box
+missed such backgrounds). The points must also fill space: the number of neighbours within ``r`` of them grows as ``r^d``
 (``d`` the dimension; ``r^(d-1)`` on a curve or surface). A sparse shape
 without outliers fails one test or the other, gets ``beta = 0``, and every
 point keeps its full mass (docs/decisions.md#background).
@@ -32,6 +37,11 @@ LEVEL_FACTOR = 2.0
 CONSISTENCY = 0.5
 DIMENSION_MARGIN = 0.5
 SHAPE_SIGMAS = 2.0
+#: Fewer points than this many times ``k`` give no background: the k-NN
+#: balls then span much of any shape, which reads as a uniform level.
+MIN_POINTS_PER_NEIGHBOUR = 20
+#: Probes per point for the share of the box where the density reads as background.
+PROBES = 2
 
 
 class Background(NamedTuple):
@@ -64,15 +74,15 @@ def estimate_background(points: np.ndarray, neighbours: int = NEIGHBOURS) -> Bac
       neighbours: ``k`` of the k-nearest-neighbour density.
 
     Returns:
-      A :class:`Background`. Fewer than ``4 k`` points, or a flat bounding
-      box, give no background.
+      A :class:`Background`. Fewer than ``20 k`` points
+      (:data:`MIN_POINTS_PER_NEIGHBOUR`), or a flat bounding box, give no background.
     """
     points = np.asarray(points, np.float64)
     n, dim = points.shape
     none = Background(0.0, 0.0, np.zeros(n), np.zeros(n))
     extent = points.max(0) - points.min(0) if n else np.zeros(dim)
     volume = float(np.prod(extent))
-    if n < 4 * neighbours or not volume > 0:
+    if n < MIN_POINTS_PER_NEIGHBOUR * neighbours or not volume > 0:
         return none
     # Work in the frame of the box (unit diagonal), so that the result does not depend on units.
     scale = float(np.linalg.norm(extent))
@@ -94,11 +104,16 @@ def estimate_background(points: np.ndarray, neighbours: int = NEIGHBOURS) -> Bac
             break
         beta = level
     below = rho < LEVEL_FACTOR * beta
+    # A fixed seed: the probes are part of the estimator, not a random draw of the caller's.
+    probes = np.random.default_rng(0).uniform(0.0, extent / scale, (PROBES * n, dim))
+    probe_radius = cKDTree(unit).query(probes, [neighbours])[0][:, 0]
+    with np.errstate(divide="ignore"):
+        share = float(np.mean(neighbours / (ball * probe_radius**dim) < LEVEL_FACTOR * beta))
     # Background fills the box: around its points the neighbour count grows
     # as r^d. Points of a sparse shape grow as r^(d-1) and do not count.
     with np.errstate(divide="ignore", invalid="ignore"):
         growth = np.log(far / neighbours) / np.log(dist[below, 1] / radius[below])
-    if (np.count_nonzero(below) < CONSISTENCY * beta * unit_volume
+    if (np.count_nonzero(below) < CONSISTENCY * beta * unit_volume * share
             or not np.median(growth) > dim - DIMENSION_MARGIN):
         return none._replace(local_density=rho / scale**dim)
     probability = np.minimum(1.0, beta / rho)

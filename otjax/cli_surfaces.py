@@ -63,6 +63,8 @@ def add_surface_parsers(sub) -> None:
     p.add_argument("--final-density-factor", type=float, default=FINAL_DENSITY_FACTOR, metavar="F",
                    help=f"the final relocation passes re-bin the facets at F times B ({FINAL_DENSITY_FACTOR:g}; "
                    "1: keep the decimation's bins)")
+    p.add_argument("--background", choices=("auto", "none"), default="auto",
+                   help="estimate uniform background noise and discount it (auto, the default) or not")
     _outputs(p)
     p.set_defaults(run=_run_surface, usage=p.error)
 
@@ -106,10 +108,11 @@ def _run_surface(args, usage) -> int:
     n_vertices = EXAMPLE_VERTICES if args.n_vertices is None else args.n_vertices
     solver = surface_solver(args.solver)
     params = {"n_vertices": n_vertices, "queue": args.queue, "seed": args.seed, "solver": solver,
-              "bin_density": args.bin_density, "final_density_factor": args.final_density_factor}
+              "bin_density": args.bin_density, "final_density_factor": args.final_density_factor,
+              "background": args.background}
     run = reconstruct_surface(points, masses, n_vertices, queue=args.queue, seed=args.seed, solver=solver,
                               bin_density=args.bin_density, final_density_factor=args.final_density_factor,
-                              progress=not args.quiet)
+                              background=args.background, progress=not args.quiet)
     result = run.to_result(params)
     return _finish(result, args, outputs)
 

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from otjax import datasets
+from otjax import datasets, datasets3d
 from otjax.background import estimate_background
 
 
@@ -66,6 +66,26 @@ def test_fills_a_box_in_3d_too():
     est = estimate_background(np.vstack([plane, noise]))
     assert est.found and est.fraction == pytest.approx(1000 / 5000, rel=0.25)
     assert not estimate_background(plane).found
+
+
+@pytest.mark.parametrize("n_outliers", [300, 900])
+def test_finds_outliers_around_a_shape_that_fills_its_box(n_outliers):
+    """An open cylinder touches its box on every side, so most outliers have
+    its points among their neighbours and read denser than the background:
+    the count must be taken where the density reads as background. (Those
+    near the surface keep a low probability: the estimate is local.)"""
+    pts = datasets3d.cylinder(3000, n_outliers=n_outliers, seed=1).points
+    est = estimate_background(pts)
+    assert est.found
+    assert est.fraction == pytest.approx(n_outliers / len(pts), rel=0.2)
+    shape, outliers = est.probability[:3000].mean(), est.probability[3000:].mean()
+    assert shape < 0.1 and outliers > 5 * shape
+
+
+@pytest.mark.parametrize("name, noise", [("cylinder", 0.0), ("cylinder", 0.01), ("staircase", 0.01), ("cube", 0.0),
+                                         ("crossing", 0.0)])
+def test_a_surface_without_outliers_has_no_background(name, noise):
+    assert not estimate_background(datasets3d.SURFACES[name](3000, noise=noise, seed=2).points).found
 
 
 def test_shape_weights_give_background_points_almost_nothing_and_the_shape_most():

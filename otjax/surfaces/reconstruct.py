@@ -1,7 +1,8 @@
 """``reconstruct_surface``: the 3D pipeline of Digne et al. 2014 (Algorithm 1).
 
-Points -> canonical frame -> initial complex (Delaunay of a subset, relaxed
-transport, facets with mass; §4.1) -> (re-binned) -> greedy half-edge
+Points (uniform background noise discounted) -> canonical frame -> initial
+complex (Delaunay of a subset, relaxed transport, facets with mass; §4.1)
+-> (re-binned) -> greedy half-edge
 collapses by increase of transport cost (§4.2, the shared loop of
 :mod:`otjax.decimation`), relocating the remaining vertex and its
 neighbours after each of the last collapses (§4.3) -> T-junctions closed
@@ -17,6 +18,7 @@ from typing import NamedTuple
 import jax
 import numpy as np
 
+from otjax.background import estimate_background, shape_weights
 from otjax.decimation.loop import QUEUES, DecimationStats, decimate
 from otjax.decimation.relocation import relocate
 from otjax.frame import to_canonical
@@ -32,6 +34,7 @@ from otjax.surfaces.t_junctions import close_t_junctions
 from otjax.validation import check_number, check_points, check_target
 
 SOLVERS = ("batched", "exact")
+BACKGROUNDS = ("auto", "none")
 #: Re-bin the initial complex with the default density before decimating
 #: (docs/decisions.md#surface_rebin).
 REBIN = False
@@ -95,7 +98,7 @@ class SurfaceReconstruction(NamedTuple):
 def reconstruct_surface(points, masses=None, n_vertices: int = 100, *, queue: str = "multiple-choice",
                         choices: int = 40, switch_factor: float = 1.0, seed: int = 0, solver: str | None = None,
                         fraction: float = FRACTION, bin_density: float = DEFAULT_DENSITY, rebin: bool = REBIN,
-                        max_sweeps: int = 10,
+                        max_sweeps: int = 10, background: str = "auto",
                         relocation: int | None = RELOCATE_LAST, final_relocations: int = FINAL_RELOCATIONS,
                         final_density_factor: float = FINAL_DENSITY_FACTOR,
                         progress: bool = False) -> SurfaceReconstruction:
@@ -119,6 +122,9 @@ def reconstruct_surface(points, masses=None, n_vertices: int = 100, *, queue: st
         sharper creases at small budgets, larger LPs (docs/benchmarks.md).
       rebin: give every facet the default bins before decimating.
       max_sweeps: relaxation sweeps of the initial complex at most.
+      background: ``"auto"``: uniform background noise estimated from the points
+        (:func:`otjax.background.estimate_background`) is discounted, each mass scaled by its point's share of
+        shape (:func:`otjax.background.shape_weights`; points of none left out); ``"none"``: all transported.
       relocation: relocate the vertex a collapse keeps and its neighbours
         (§4.3: alternations of the closed-form target, a move half way
         there, a re-solve of its star; kept where the cost falls) after
@@ -127,11 +133,9 @@ def reconstruct_surface(points, masses=None, n_vertices: int = 100, *, queue: st
         paper does; 0: never during the decimation. Without relocation the vertices stay input points.
       final_relocations: relocation passes over every vertex after the
         decimation (fewer if a pass moves none; 0: none).
-      final_density_factor: before those passes the facets get new bins,
-        this many times ``bin_density``, and the transport is relaxed on
-        them (the result's cost is on these bins; 1: keep the decimation's):
-        the few facets left can afford a finer quadrature, which sharpens
-        creases and corners (docs/decisions.md#final_density).
+      final_density_factor: the facets' bins before those passes, in multiples of ``bin_density``, the
+        transport relaxed on them (the result's cost is on these; 1: the decimation's): a finer quadrature
+        sharpens creases and corners (docs/decisions.md#final_density).
       progress: show a progress bar.
 
     Returns:
@@ -148,11 +152,11 @@ def reconstruct_surface(points, masses=None, n_vertices: int = 100, *, queue: st
     seconds = _Laps()
     solver = surface_solver(solver)
     points, masses = _checked(points, masses, n_vertices, queue, choices, switch_factor, solver, fraction,
-                              bin_density, final_density_factor)
+                              bin_density, final_density_factor, background)
     seed = check_number("seed", seed, integer=True)
     relocation = check_number("relocation", relocation, minimum=0, integer=True, allow_none=True)
     final_relocations = check_number("final_relocations", final_relocations, minimum=0, integer=True)
-    frame, q, m = to_canonical(points, masses)
+    frame, q, m = to_canonical(*_shape_part(points, masses, background))
     method = "auto" if solver == "batched" else "exact"
     with jax.enable_x64(True):
         plan = _initial_plan(q, m, method, fraction, seed, max_sweeps, bin_density, n_vertices)
@@ -229,8 +233,21 @@ def surface_solver(solver: str | None) -> str:
     return "exact" if default_solver() == "exact" else "batched"
 
 
+def _shape_part(points: np.ndarray, masses: np.ndarray | None, background: str):
+    """``(points, masses)`` to transport: with ``background="auto"``, where the
+    points hold uniform background noise, each mass scaled by its point's
+    share of shape and the points of none left out; else as given."""
+    if background == "none":
+        return points, masses
+    weights = shape_weights(estimate_background(points))
+    keep = weights > 0
+    if keep.all():  # no background found: all ones
+        return points, masses
+    return points[keep], (np.ones(len(points)) if masses is None else masses)[keep] * weights[keep]
+
+
 def _checked(points, masses, n_vertices, queue, choices, switch_factor, solver, fraction, bin_density,
-             final_density_factor):
+             final_density_factor, background):
     """Validated ``(points, masses)``; raises on bad parameters."""
     points, masses = check_points(points, masses, dim=3, min_points=4)
     if masses is not None and np.any(masses <= 0):
@@ -241,6 +258,8 @@ def _checked(points, masses, n_vertices, queue, choices, switch_factor, solver, 
     check_target(n_vertices, len(points), minimum=4)
     if queue not in QUEUES:
         raise ValueError(f"queue must be one of {', '.join(QUEUES)}, got {queue!r}")
+    if background not in BACKGROUNDS:
+        raise ValueError(f"background must be one of {', '.join(BACKGROUNDS)}, got {background!r}")
     if solver not in SOLVERS:
         raise ValueError(f"solver must be one of {', '.join(SOLVERS)}, got {solver!r}")
     check_number("choices", choices, minimum=1, integer=True)

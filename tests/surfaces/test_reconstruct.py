@@ -148,3 +148,23 @@ def test_relocation_lowers_the_final_cost_on_the_noisy_staircase(noisy_staircase
     # collapses alone keep input points as vertices (up to the frame's rounding); relocation moves them
     gap = lambda v: np.min(np.linalg.norm(v[:, None] - pts[None], axis=2), axis=1)  # noqa: E731
     assert gap(fixed.vertices).max() < 1e-12 and gap(moved.vertices).max() > 1e-3
+
+
+def test_background_noise_is_discounted_and_clean_input_left_as_it_is():
+    rng = np.random.default_rng(0)
+    square = SQUARE.sample(400, rng)
+    outliers = rng.uniform([0, 0, 0.1], [1, 1, 0.9], (100, 3))
+    pts = np.vstack([square, outliers])
+    kw = {"solver": "exact", "choices": 10, "max_sweeps": 1, "seed": 5, "final_density_factor": 1.0}
+    auto = reconstruct_surface(pts, n_vertices=10, **kw)
+    none = reconstruct_surface(pts, n_vertices=10, background="none", **kw)
+    # The plan holds the transported points and masses: the outliers lost most of theirs.
+    assert none.plan.masses.sum() == len(pts)
+    assert auto.plan.masses.sum() < len(pts) - 0.5 * len(outliers)
+    off = lambda r: np.abs(r.vertices[:, 2] - 0.5).max()  # noqa: E731
+    assert off(auto) < 0.5 * off(none)
+    cube = CUBE.sample(400, rng)
+    clean_auto = reconstruct_surface(cube, n_vertices=10, **kw)
+    clean_none = reconstruct_surface(cube, n_vertices=10, background="none", **kw)
+    np.testing.assert_array_equal(clean_auto.vertices, clean_none.vertices)
+    np.testing.assert_array_equal(clean_auto.triangles, clean_none.triangles)
