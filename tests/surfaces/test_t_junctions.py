@@ -4,7 +4,7 @@ from itertools import combinations
 
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 
 from otjax.metrics3d import crease_error, edge_sharpness
@@ -147,7 +147,7 @@ def test_closing_keeps_the_plan_feasible_and_leaves_no_t_junction(seed, n, keep,
     c = cracked_complex(seed, n, keep)
     plan = random_plan(c, rng)
     before = len(find_t_junctions(c, angle))
-    assert before >= 1 or not len(c.triangles)
+    assume(before >= 1)  # a crack can be refused (a half would be a sliver): those examples test nothing here
     splits = close_t_junctions(plan, angle)
     assert splits >= min(1, before)  # a split can undo another T-junction of the round
     assert find_t_junctions(plan.complex, angle) == []
