@@ -16,10 +16,11 @@ points, measure the share of the box where a probe would read below the
 same cut, and background of density ``beta`` puts ``beta * volume * share``
 points there (near a shape that fills its box, an outlier's neighbours are
 the shape's points, so it reads denser: counting against the whole box
-missed such backgrounds). The points must also fill space: the number of neighbours within ``r`` of them grows as ``r^d``
-(``d`` the dimension; ``r^(d-1)`` on a curve or surface). A sparse shape
-without outliers fails one test or the other, gets ``beta = 0``, and every
-point keeps its full mass (docs/decisions.md#background).
+missed such backgrounds). The points must also fill space: the number of
+neighbours within ``r`` of them grows as ``r^d`` (``d`` the dimension;
+``r^(d-1)`` on a curve or surface). A sparse shape without outliers fails
+one test or the other, gets ``beta = 0``, and every point keeps its full
+mass (docs/decisions.md#background).
 
 NumPy and scipy only: the same estimate serves curves and surfaces.
 """

@@ -51,9 +51,7 @@ def find_t_junctions(complex_: SimplicialComplex, angle: float = T_JUNCTION_ANGL
         common = set(complex_.neighbors(a)) & set(complex_.neighbors(b))
         open_ = sorted(v for v in common if any(v not in t for t in facets))
         if open_:
-            u, w = x[a] - x[open_], x[b] - x[open_]
-            cos = np.einsum("ij,ij->i", u, w) / (np.linalg.norm(u, axis=1) * np.linalg.norm(w, axis=1))
-            j = TJunction(a, b, open_[int(np.argmin(cos))])
+            j = TJunction(a, b, min(open_, key=lambda v: _cosine(x, a, v, b)))  # the widest angle, ties by id
             if is_t_junction(complex_, j, angle):
                 found.append(j)
     return found
@@ -79,10 +77,16 @@ def is_t_junction(complex_: SimplicialComplex, j: TJunction, angle: float = T_JU
     return True
 
 
+def _cosine(x: np.ndarray, a: int, v: int, b: int) -> float:
+    """Cosine of the angle ``a v b`` (-1 where it is undefined: a zero-length side)."""
+    u, w = x[a] - x[v], x[b] - x[v]
+    norms = float(np.linalg.norm(u) * np.linalg.norm(w))
+    return float(u @ w) / norms if norms > 0 else -1.0
+
+
 def _flat(x: np.ndarray, a: int, v: int, b: int, angle: float) -> bool:
     """Whether the angle ``a v b`` is at least ``180 - angle`` degrees (or undefined)."""
-    u, w = x[a] - x[v], x[b] - x[v]
-    return bool(u @ w <= -np.cos(np.radians(angle)) * np.linalg.norm(u) * np.linalg.norm(w))
+    return _cosine(x, a, v, b) <= -np.cos(np.radians(angle))
 
 
 def close_t_junctions(plan: SurfacePlan, angle: float = T_JUNCTION_ANGLE) -> int:
