@@ -214,8 +214,12 @@ def test_layers_of_a_height_field(seed, n, fold):
     rng = np.random.default_rng(seed)
     xy = rng.random((n, 2))
     tri = Delaunay(xy).simplices
-    z = 0.3 * np.sin(3 * xy[:, 0] + rng.random()) * np.cos(2 * xy[:, 1])  # |grad z| <= 0.3 * sqrt(13) < 1.1
-    v = np.c_[xy, np.minimum(z, 0.7)]
+    z = 0.3 * np.sin(3 * xy[:, 0] + rng.random()) * np.cos(2 * xy[:, 1])
+    # The slope that matters is each triangle's (a sliver's can far exceed |grad z|): scaled to at most 1.
+    e = xy[tri[:, 1:]] - xy[tri[:, :1]]
+    dz = z[tri[:, 1:]] - z[tri[:, :1]]
+    slope = np.linalg.norm(np.linalg.solve(e, dz[..., None])[..., 0], axis=1)
+    v = np.c_[xy, z / max(1.0, float(slope.max()))]
     q, _ = np.linalg.qr(rng.normal(size=(3, 3)))
     v = v @ q.T + rng.normal(size=3)
     s = metrics3d.edge_sharpness(v, tri)
