@@ -22,6 +22,9 @@ neighbours within ``r`` of them grows as ``r^d`` (``d`` the dimension;
 one test or the other, gets ``beta = 0``, and every point keeps its full
 mass (docs/decisions.md#background).
 
+An outlier near the shape reads dense; :func:`near_shape` finds the points
+that stand off the flat through their neighbours (surfaces leave them out).
+
 NumPy and scipy only: the same estimate serves curves and surfaces.
 """
 
@@ -43,6 +46,11 @@ SHAPE_SIGMAS = 2.0
 MIN_POINTS_PER_NEIGHBOUR = 20
 #: Probes per point for the share of the box where the density reads as background.
 PROBES = 2
+#: A point farther than this many residual scales from the flat through its
+#: neighbours is off the shape (:func:`near_shape`).
+FLAT_SIGMAS = 5.0
+# Median absolute residual to standard deviation, for Gaussian residuals.
+_MAD_TO_SIGMA = 1.4826
 
 
 class Background(NamedTuple):
@@ -139,3 +147,47 @@ def shape_weights(background: Background, neighbours: int = NEIGHBOURS, sigmas: 
         return np.ones(len(background.probability))
     factor = 1.0 + sigmas / math.sqrt(neighbours)
     return 1.0 - np.minimum(1.0, factor * background.probability)
+
+
+def _flats(near: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Weighted least-squares flats of ``near (n, k, d)`` with weights ``w (n, k)``:
+    ``(centre (n, d), normal (n, d))``."""
+    w = w[..., None] + 1e-12  # a neighbourhood of weight-0 points still gets a flat
+    centre = (w * near).sum(1) / w.sum(1)
+    spread = near - centre[:, None]
+    return centre, np.linalg.eigh(np.einsum("nki,nkj->nij", w * spread, spread))[1][:, :, 0]
+
+
+def near_shape(points: np.ndarray, weights: np.ndarray, neighbours: int = NEIGHBOURS,
+               sigmas: float = FLAT_SIGMAS) -> np.ndarray:
+    """Which points lie on the flat (a plane in 3D, a line in 2D) through their neighbours.
+
+    An outlier close to a surface reads dense, since its ``k`` nearest
+    neighbours are the surface's points, and keeps much of its
+    :func:`shape_weights`; it still stands off their plane. Each point's
+    ``k`` neighbours (the point left out) get a least-squares flat, weighted
+    by ``weights``, and a residual scale: the larger of their median
+    distance to it and the median of that over all points, as a standard
+    deviation. A point is near the shape when its distance to the flat is
+    at most ``sigmas`` scales. Where one flat does not fit (a crease, a
+    corner) the neighbours' own residuals are large, and so is the scale:
+    the point stays. Outliers close together raise each other's scale and
+    may stay.
+
+    Args:
+      points: ``(n, d)`` float64 points, ``d`` in 2 or 3, ``n > k``.
+      weights: ``(n,)`` shape weights in ``[0, 1]``, not all 0.
+
+    Returns:
+      ``(n,)`` bool, True where the point is near the shape.
+    """
+    points = np.asarray(points, np.float64)
+    idx = cKDTree(points).query(points, neighbours + 1)[1][:, 1:]  # the point itself left out
+    near = points[idx]  # (n, k, d)
+    centre, normal = _flats(near, weights[idx])
+    residual = np.abs(np.einsum("nkd,nd->nk", near - centre[:, None], normal))
+    local = np.median(residual, axis=1)
+    # The floor: on exact flats every residual is a rounding error.
+    floor = 1e-9 * float(np.linalg.norm(np.ptp(points, axis=0)))
+    scale = _MAD_TO_SIGMA * np.maximum(np.maximum(local, np.median(local[weights > 0])), floor)
+    return np.abs(np.einsum("nd,nd->n", points - centre, normal)) <= sigmas * scale

@@ -2,9 +2,11 @@
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from otjax import datasets, datasets3d
-from otjax.background import estimate_background
+from otjax.background import estimate_background, near_shape, shape_weights
 
 
 def uneven_star(n=3000, noise=0.01, seed=0):
@@ -109,3 +111,60 @@ def test_shape_weights_give_background_points_almost_nothing_and_the_shape_most(
     assert ((w >= 0) & (w <= 1)).all()
     no_background = estimate_background(line)
     assert not no_background.found and (shape_weights(no_background) == 1).all()
+
+
+def _rotation(rng):
+    q, r = np.linalg.qr(rng.standard_normal((3, 3)))
+    return q * np.sign(np.diag(r))
+
+
+@settings(max_examples=100, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), noise=st.sampled_from([0.0, 1e-3, 1e-2]),
+       scale=st.floats(1e-3, 1e3), fold=st.floats(30.0, 150.0))
+def test_near_shape_drops_points_off_a_folded_sheet_and_keeps_the_sheet(seed, noise, scale, fold):
+    """Two half-planes meeting at ``fold`` degrees on the y axis (a crease),
+    noise of standard deviation ``noise`` (side 1), rotated, scaled and
+    shifted: the sheet is kept, crease points included (at most 2 of its
+    1,500 points go: a corner of the crease and a noise tail at the border
+    can stand off every flat of their neighbours), and points
+    ten to fifteen standard deviations (at least 0.05) off the sheet, away
+    from the crease, the other sheet and each other, are dropped."""
+    rng = np.random.default_rng(seed)
+    n = 1500
+    u, y = rng.uniform(0, 1, n), rng.uniform(0, 1, n)
+    a = np.radians(fold)
+    side = rng.random(n) < 0.5
+    sheet = np.where(side[:, None], np.c_[u, y, 0 * u], np.c_[u * np.cos(a), y, u * np.sin(a)])
+    sheet = sheet + noise * rng.standard_normal(sheet.shape)
+    # Off the first half-plane over a 3 x 3 grid, 0.25 apart (a neighbourhood spans about 0.1 here).
+    grid = np.stack(np.meshgrid([0.35, 0.6, 0.85], [0.25, 0.5, 0.75]), -1).reshape(-1, 2)
+    m = len(grid)
+    off = np.c_[grid + rng.uniform(-0.02, 0.02, (m, 2)),
+                -max(10 * noise, 0.05) * rng.uniform(1, 1.5, m)]  # the side away from the other sheet
+    points = np.concatenate([sheet, off]) @ _rotation(rng).T * scale + rng.uniform(-1, 1, 3) * scale
+    near = near_shape(points, np.ones(len(points)))
+    assert np.count_nonzero(~near[:n]) <= 2, f"sheet points dropped: {np.flatnonzero(~near[:n])[:5]}"
+    assert not near[n:].any(), f"{int(near[n:].sum())} off-sheet points kept"
+
+
+def test_near_shape_in_2d_keeps_a_noisy_line_and_drops_points_off_it():
+    rng = np.random.default_rng(3)
+    line = np.c_[rng.uniform(0, 1, 800), 0.002 * rng.standard_normal(800)]
+    x = np.linspace(0.2, 0.8, 5)  # 0.15 apart: no off point among another's neighbours
+    off = np.c_[x, rng.choice([-1, 1], 5) * rng.uniform(0.03, 0.05, 5)]
+    near = near_shape(np.concatenate([line, off]), np.ones(805))
+    assert np.count_nonzero(~near[:800]) <= 2
+    assert not near[800:].any()
+
+
+def test_near_shape_leaves_the_surface_and_drops_most_outliers_around_a_cylinder():
+    """The outliers that :func:`shape_weights` leaves mass to are those near the
+    cylinder; most of them stand off its tangent planes and go."""
+    truth = datasets3d.cylinder_truth()
+    points = datasets3d.sample_surface(truth, 3000, n_outliers=300, seed=4)
+    w = shape_weights(estimate_background(points))
+    near = near_shape(points, w)
+    assert near[:3000].all()
+    kept_before = w[3000:].sum()
+    assert kept_before > 100  # the premise: density alone leaves the outliers real mass
+    assert (w[3000:] * near[3000:]).sum() < 0.5 * kept_before

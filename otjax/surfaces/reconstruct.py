@@ -18,7 +18,7 @@ from typing import NamedTuple
 import jax
 import numpy as np
 
-from otjax.background import estimate_background, shape_weights
+from otjax.background import estimate_background, near_shape, shape_weights
 from otjax.decimation.loop import QUEUES, DecimationStats, decimate
 from otjax.decimation.relocation import relocate
 from otjax.frame import to_canonical
@@ -122,9 +122,9 @@ def reconstruct_surface(points, masses=None, n_vertices: int = 100, *, queue: st
         sharper creases at small budgets, larger LPs (docs/benchmarks.md).
       rebin: give every facet the default bins before decimating.
       max_sweeps: relaxation sweeps of the initial complex at most.
-      background: ``"auto"``: uniform background noise estimated from the points
-        (:func:`otjax.background.estimate_background`) is discounted, each mass scaled by its point's share of
-        shape (:func:`otjax.background.shape_weights`; points of none left out); ``"none"``: all transported.
+      background: ``"auto"``: uniform background noise (:func:`otjax.background.estimate_background`) discounted:
+        masses times shape shares (:func:`~otjax.background.shape_weights`), points of none or off the plane
+        of their neighbours (:func:`~otjax.background.near_shape`) left out; ``"none"``: all transported.
       relocation: relocate the vertex a collapse keeps and its neighbours
         (§4.3: alternations of the closed-form target, a move half way
         there, a re-solve of its star; kept where the cost falls) after
@@ -236,13 +236,15 @@ def surface_solver(solver: str | None) -> str:
 def _shape_part(points: np.ndarray, masses: np.ndarray | None, background: str):
     """``(points, masses)`` to transport: with ``background="auto"``, where the
     points hold uniform background noise, each mass scaled by its point's
-    share of shape and the points of none left out; else as given."""
+    share of shape and the points of none (or off the flat through their
+    neighbours: :func:`otjax.background.near_shape`) left out; else as given."""
     if background == "none":
         return points, masses
-    weights = shape_weights(estimate_background(points))
-    keep = weights > 0
-    if keep.all():  # no background found: all ones
+    found = estimate_background(points)
+    if not found.found:
         return points, masses
+    weights = shape_weights(found)
+    keep = (weights > 0) & near_shape(points, weights)
     return points[keep], (np.ones(len(points)) if masses is None else masses)[keep] * weights[keep]
 
 
