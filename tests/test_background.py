@@ -95,8 +95,6 @@ def test_shape_weights_give_background_points_almost_nothing_and_the_shape_most(
     mass in all (where ``1 - beta / rho`` would leave it a sizeable share:
     k-NN estimates of a uniform field scatter about 25% around it), the
     line's points most of theirs."""
-    from otjax.background import shape_weights
-
     rng = np.random.default_rng(5)
     noise = rng.random((3000, 2))
     t = rng.random(3000)
@@ -111,11 +109,6 @@ def test_shape_weights_give_background_points_almost_nothing_and_the_shape_most(
     assert ((w >= 0) & (w <= 1)).all()
     no_background = estimate_background(line)
     assert not no_background.found and (shape_weights(no_background) == 1).all()
-
-
-def _rotation(rng):
-    q, r = np.linalg.qr(rng.standard_normal((3, 3)))
-    return q * np.sign(np.diag(r))
 
 
 @settings(max_examples=100, deadline=None)
@@ -141,7 +134,7 @@ def test_near_shape_drops_points_off_a_folded_sheet_and_keeps_the_sheet(seed, no
     m = len(grid)
     off = np.c_[grid + rng.uniform(-0.02, 0.02, (m, 2)),
                 -max(10 * noise, 0.05) * rng.uniform(1, 1.5, m)]  # the side away from the other sheet
-    points = np.concatenate([sheet, off]) @ _rotation(rng).T * scale + rng.uniform(-1, 1, 3) * scale
+    points = np.concatenate([sheet, off]) @ np.linalg.qr(rng.standard_normal((3, 3)))[0] * scale + rng.uniform(-1, 1, 3) * scale
     near = near_shape(points, np.ones(len(points)))
     assert np.count_nonzero(~near[:n]) <= 2, f"sheet points dropped: {np.flatnonzero(~near[:n])[:5]}"
     assert not near[n:].any(), f"{int(near[n:].sum())} off-sheet points kept"
