@@ -1,0 +1,179 @@
+"""Open borders moved out to where the points end (not in the paper).
+
+At an open border the transport cost settles vertices inside the shape: a
+vertex's own bin takes the points nearest to it whatever their amount, so
+a border vertex ends up short of the last points, by up to a few percent
+of the diagonal at a few thousand points
+(docs/benchmarks.md#surfaces-reconstruction). :func:`fit_border` moves
+each *flat* border vertex (its facets' planes within ``flat_angle`` of one
+another) within that plane, straight across its border, to the farthest
+point of a strip beside it. Vertices on creases and where a border meets
+a crease are left where they are. The farthest point decides: give the
+points without their outliers.
+
+A border edge is an edge of one sheet: a fold of two facets lying over
+each other counts as one sheet (:func:`otjax.metrics3d.edge_sharpness`).
+Every decision is taken on the positions given; the vertices move
+together. The rule uses lengths relative to the vertex's own border
+edges, so scaling, rotating or translating the input moves the result
+with it.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+
+from otjax.metrics3d import edge_sharpness
+
+#: Largest angle, in degrees, between two facets of a vertex that still
+#: counts as flat (docs/decisions.md#border_fit).
+FLAT_ANGLE = 45.0
+#: Fewest points in a vertex's strip for it to move.
+MIN_POINTS = 5
+
+
+class BorderFit(NamedTuple):
+    """What :func:`fit_border` returns.
+
+    Attributes:
+      vertices: ``(V, 3)`` float64 the positions after the fit.
+      moved: ``(m,)`` int64 rows of ``vertices`` that moved, increasing.
+    """
+
+    vertices: np.ndarray
+    moved: np.ndarray
+
+
+def fit_border(vertices, triangles, points, flat_angle: float = FLAT_ANGLE) -> BorderFit:
+    """Moves the flat border vertices of a complex out to the end of the points.
+
+    For a border vertex ``v`` with at least two border neighbours (the
+    straightest pair of them is used) whose facets' normals are all within
+    ``flat_angle`` of one another: ``N`` their mean normal, ``T`` the
+    direction between the two neighbours in that plane, ``out`` the
+    direction in the plane across ``T`` away from ``v``'s facets, and ``L``
+    the shorter of its two border edges. The strip is the points ``p``
+    with ``|(p - v).T| <= L/2``, ``|(p - v).N| <= L/10`` and
+    ``|(p - v).out| <= L``; with at least :data:`MIN_POINTS` of them, ``v``
+    moves by ``max (p - v).out`` along ``out`` (outward, or inward where
+    the points end before it).
+
+    Args:
+      vertices: ``(V, 3)`` vertex positions.
+      triangles: ``(T, 3)`` int rows into ``vertices``.
+      points: ``(n, 3)`` the points the complex was reconstructed from
+        (without outliers: the farthest point of a strip decides).
+      flat_angle: degrees, in ``(0, 90)``.
+
+    Returns:
+      :class:`BorderFit`.
+
+    Raises:
+      ValueError: arrays of the wrong shape, non-finite values, indices out
+        of range, ``flat_angle`` outside ``(0, 90)``.
+
+    Example:
+      >>> import numpy as np
+      >>> g = np.linspace(0.0, 1.0, 41)
+      >>> pts = np.c_[np.stack(np.meshgrid(g, g), -1).reshape(-1, 2), np.zeros(41 * 41)]
+      >>> v = np.array([[0.1, 0.1, 0], [0.5, 0.1, 0], [0.9, 0.1, 0], [0.1, 0.5, 0], [0.5, 0.5, 0],
+      ...               [0.9, 0.5, 0], [0.1, 0.9, 0], [0.5, 0.9, 0], [0.9, 0.9, 0]])
+      >>> t = [[0, 1, 4], [0, 4, 3], [1, 2, 5], [1, 5, 4], [3, 4, 7], [3, 7, 6], [4, 5, 8], [4, 8, 7]]
+      >>> fit = fit_border(v, t, pts)
+      >>> fit.moved.tolist()
+      [0, 1, 2, 3, 5, 6, 7, 8]
+      >>> fit.vertices[[0, 1, 4]].round(3).tolist()  # a corner, a side, the centre
+      [[0.0, 0.0, 0.0], [0.5, 0.0, 0.0], [0.5, 0.5, 0.0]]
+    """
+    vertices, triangles, points = _checked(vertices, triangles, points, flat_angle)
+    out = vertices.copy()
+    if not len(triangles) or not len(points):
+        return BorderFit(out, np.zeros(0, np.int64))
+    sharp = edge_sharpness(vertices, triangles)
+    neighbours: dict[int, list[int]] = {}
+    for a, b in sharp.edges[sharp.layers == 1].tolist():
+        neighbours.setdefault(a, []).append(b)
+        neighbours.setdefault(b, []).append(a)
+    normal = np.cross(vertices[triangles[:, 1]] - vertices[triangles[:, 0]],
+                      vertices[triangles[:, 2]] - vertices[triangles[:, 0]])
+    length = np.linalg.norm(normal, axis=1)
+    normal = np.divide(normal, length[:, None], out=np.zeros_like(normal), where=length[:, None] > 0)
+    facets: dict[int, list[int]] = {}
+    for f, row in enumerate(triangles.tolist()):
+        for v in row:
+            facets.setdefault(v, []).append(f)
+    cos_flat = np.cos(np.radians(flat_angle))
+    moved = []
+    for v in sorted(neighbours):
+        step = _step(v, neighbours[v], vertices, triangles, normal, facets.get(v, []), points, cos_flat)
+        if step is not None:
+            out[v] = vertices[v] + step
+            moved.append(v)
+    return BorderFit(out, np.asarray(moved, np.int64))
+
+
+def _step(v, neighbours, vertices, triangles, normal, facets, points, cos_flat) -> np.ndarray | None:
+    """The move of border vertex ``v``, or ``None`` if it stays (not flat,
+    fewer than two border neighbours, a degenerate facet or too few points)."""
+    if len(neighbours) < 2 or not facets:
+        return None
+    n = normal[facets]
+    if not np.all(np.linalg.norm(n, axis=1) > 0):
+        return None
+    n = n * np.where(n @ n[0] < 0, -1.0, 1.0)[:, None]  # facets carry no consistent orientation
+    if np.any(n @ n.T < cos_flat):
+        return None
+    axis = n.mean(0)
+    axis /= np.linalg.norm(axis)
+    u, w = _straightest(v, neighbours, vertices)
+    along = vertices[w] - vertices[u]
+    along -= (along @ axis) * axis
+    size = np.linalg.norm(along)
+    if not size > 0:
+        return None
+    along /= size
+    across = np.cross(axis, along)
+    centre = vertices[triangles[facets]].mean(axis=(0, 1))
+    if (centre - vertices[v]) @ across > 0:
+        across = -across
+    reach = min(np.linalg.norm(vertices[u] - vertices[v]), np.linalg.norm(vertices[w] - vertices[v]))
+    d = points - vertices[v]
+    t, h, o = d @ along, d @ axis, d @ across
+    strip = (np.abs(t) <= reach / 2) & (np.abs(h) <= reach / 10) & (np.abs(o) <= reach)
+    if strip.sum() < MIN_POINTS:
+        return None
+    return float(o[strip].max()) * across
+
+
+def _straightest(v: int, neighbours: list[int], vertices: np.ndarray) -> tuple[int, int]:
+    """The two border neighbours of ``v`` whose edges from ``v`` are closest
+    to opposite (ties: the first pair in increasing ids)."""
+    nb = sorted(neighbours)
+    d = vertices[nb] - vertices[v]
+    d /= np.maximum(np.linalg.norm(d, axis=1, keepdims=True), np.finfo(np.float64).tiny)
+    cos = d @ d.T
+    i, j = np.triu_indices(len(nb), 1)
+    k = int(np.argmin(cos[i, j]))
+    return nb[i[k]], nb[j[k]]
+
+
+def _checked(vertices, triangles, points, flat_angle):
+    """The arrays as float64 / int64, checked (see :func:`fit_border`)."""
+    vertices = np.asarray(vertices, np.float64)
+    points = np.asarray(points, np.float64)
+    triangles = np.asarray(triangles)
+    if vertices.ndim != 2 or vertices.shape[1] != 3 or not np.isfinite(vertices).all():
+        raise ValueError(f"vertices must be a finite (V, 3) array, got shape {vertices.shape}")
+    if points.ndim != 2 or points.shape[1] != 3 or not np.isfinite(points).all():
+        raise ValueError(f"points must be a finite (n, 3) array, got shape {points.shape}")
+    if len(triangles) == 0:
+        triangles = np.zeros((0, 3), np.int64)
+    if triangles.ndim != 2 or triangles.shape[1] != 3 or not np.issubdtype(triangles.dtype, np.integer):
+        raise ValueError(f"triangles must be an integer (T, 3) array, got shape {triangles.shape}")
+    if len(triangles) and (triangles.min() < 0 or triangles.max() >= len(vertices)):
+        raise ValueError(f"triangles index vertices 0..{len(vertices) - 1}, got {triangles.min()}..{triangles.max()}")
+    if isinstance(flat_angle, bool) or not np.isscalar(flat_angle) or not 0 < float(flat_angle) < 90:
+        raise ValueError(f"flat_angle must be a number of degrees in (0, 90), got {flat_angle!r}")
+    return vertices, triangles.astype(np.int64), points

@@ -1,0 +1,120 @@
+"""Border fitting (otjax.surfaces.border_fit) against its rule written out in
+the frame of a square: which vertices move, and where."""
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from otjax.surfaces.border_fit import fit_border
+
+
+def grid_square(k: int, margin: float):
+    """``k x k`` vertices over ``[margin, 1 - margin]^2`` in the plane z = 0, two triangles a cell."""
+    g = np.linspace(margin, 1 - margin, k)
+    x, y = np.meshgrid(g, g, indexing="ij")
+    vertices = np.c_[x.ravel(), y.ravel(), np.zeros(k * k)]
+    tri = []
+    for i in range(k - 1):
+        for j in range(k - 1):
+            a, b, c, d = i * k + j, (i + 1) * k + j, (i + 1) * k + j + 1, i * k + j + 1
+            tri += [(a, b, c), (a, c, d)]
+    return vertices, np.array(tri)
+
+
+def expected_square(vertices, points, k, margin):
+    """The rule in the square's frame: border vertices move across their
+    border (corners along the diagonal) to the farthest point of the strip."""
+    out = vertices.copy()
+    step = (1 - 2 * margin) / (k - 1)
+    for v in range(k * k):
+        i, j = divmod(v, k)
+        side_x = -1 if i == 0 else 1 if i == k - 1 else 0
+        side_y = -1 if j == 0 else 1 if j == k - 1 else 0
+        if side_x == side_y == 0:
+            continue
+        across = np.array([side_x, side_y, 0.0])
+        across /= np.linalg.norm(across)
+        along = np.array([-across[1], across[0], 0.0])
+        d = points - vertices[v]
+        t, h, o = d @ along, d[:, 2], d @ across
+        strip = (np.abs(t) <= step / 2) & (np.abs(h) <= step / 10) & (np.abs(o) <= step)
+        assert strip.sum() >= 5  # premise: every border vertex moves
+        out[v] = vertices[v] + o[strip].max() * across
+    return out
+
+
+def random_rotation(rng):
+    q, r = np.linalg.qr(rng.normal(size=(3, 3)))
+    return q * np.sign(np.diag(r))
+
+
+@settings(max_examples=100, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), k=st.integers(3, 5), margin=st.floats(0.01, 0.06),
+       n=st.integers(800, 2000), scale_exp=st.floats(-3, 3))
+def test_square_border_vertices_move_to_the_end_of_their_strip_in_any_frame(seed, k, margin, n, scale_exp):
+    rng = np.random.default_rng(seed)
+    vertices, triangles = grid_square(k, margin)
+    points = np.c_[rng.random((n, 2)), np.zeros(n)]
+    # A second sheet, beyond the square's borders but off its plane: it must not count.
+    off = np.c_[rng.uniform(-0.2, 1.2, (200, 2)), rng.choice([-0.2, 0.2], 200)]
+    points = np.concatenate([points, off])
+    want = expected_square(vertices, points, k, margin)
+    rot, scale, shift = random_rotation(rng), 10.0**scale_exp, rng.normal(size=3) * 10.0**scale_exp
+    frame = lambda x: scale * x @ rot.T + shift  # noqa: E731
+    fit = fit_border(frame(vertices), triangles, frame(points))
+    border = np.flatnonzero(np.any(want != vertices, axis=1) | np.isin(np.arange(k * k), fit.moved))
+    interior = np.setdiff1d(np.arange(k * k), border)
+    np.testing.assert_array_equal(fit.moved, np.sort(border))
+    assert len(border) == 4 * (k - 1)
+    np.testing.assert_allclose(fit.vertices, frame(want), rtol=0, atol=1e-9 * scale)
+    np.testing.assert_array_equal(fit.vertices[interior], frame(vertices)[interior])
+    # Each side vertex ends where the points of its strip end: within the square, near its side.
+    assert np.all((want[:, :2] >= -1e-12) & (want[:, :2] <= 1 + 1e-12))
+
+
+def test_vertices_on_a_crease_stay_and_the_others_move_out():
+    # Two sheets folded at a right angle along the x axis: y >= 0 at z = 0 and z >= 0 at y = 0.
+    rng = np.random.default_rng(0)
+    k, margin = 4, 0.05
+    flat, triangles = grid_square(k, margin)
+    flat[:, 1] -= margin  # the crease row at y = 0
+    standing = flat[:, [0, 2, 1]]  # the same grid in the plane y = 0
+    on_crease = np.arange(k * k) % k == 0  # rows i * k + j with j = 0
+    vertices = np.concatenate([flat, standing[~on_crease]])  # the crease row shared
+    index = np.where(on_crease, np.arange(k * k), k * k + np.cumsum(~on_crease) - 1)
+    triangles = np.concatenate([triangles, index[triangles]])
+    u = rng.random((3000, 2))
+    points = np.concatenate([np.c_[u[:1500, 0], u[:1500, 1], np.zeros(1500)],
+                             np.c_[u[1500:, 0], np.zeros(1500), u[1500:, 1]]])
+    fit = fit_border(vertices, triangles, points)
+    crease = np.flatnonzero((vertices[:, 1] == 0) & (vertices[:, 2] == 0))
+    assert len(crease) == k and not np.isin(crease, fit.moved).any()
+    np.testing.assert_array_equal(fit.vertices[crease], vertices[crease])
+    # The far borders (y or z near 1) move out to the last points, off the crease.
+    far = np.flatnonzero(np.maximum(vertices[:, 1], vertices[:, 2]) > 0.9)
+    assert np.isin(far, fit.moved).all()
+    assert np.all(np.maximum(fit.vertices[far, 1], fit.vertices[far, 2]) > np.maximum(vertices[far, 1],
+                                                                                         vertices[far, 2]))
+
+
+def test_nothing_moves_without_triangles_or_points():
+    v, t = grid_square(3, 0.1)
+    assert fit_border(v, t, np.zeros((0, 3))).moved.size == 0
+    fit = fit_border(v, np.zeros((0, 3), np.int64), np.random.default_rng(0).random((50, 3)))
+    assert fit.moved.size == 0 and np.array_equal(fit.vertices, v)
+
+
+@pytest.mark.parametrize("change, message", [
+    ({"vertices": np.zeros((4, 2))}, "vertices"),
+    ({"points": np.full((3, 3), np.nan)}, "points"),
+    ({"triangles": [[0, 1, 9]]}, "triangles"),
+    ({"triangles": [[0.0, 1.0, 2.0]]}, "triangles"),
+    ({"flat_angle": 90}, "flat_angle"),
+    ({"flat_angle": True}, "flat_angle"),
+])
+def test_bad_input_is_named(change, message):
+    v, t = grid_square(3, 0.1)
+    args = {"vertices": v, "triangles": t, "points": np.random.default_rng(0).random((50, 3)), **change}
+    with pytest.raises(ValueError, match=message):
+        fit_border(**args)
