@@ -24,14 +24,18 @@ from __future__ import annotations
 from typing import NamedTuple
 
 import numpy as np
+from scipy.spatial import cKDTree
 
 from otjax.metrics3d import edge_sharpness
+from otjax.surfaces.star_plan import face_normals
 
 #: Largest angle, in degrees, between two facets of a vertex that still
 #: counts as flat (docs/decisions.md#border_fit).
 FLAT_ANGLE = 45.0
 #: Fewest points in a vertex's strip for it to move.
 MIN_POINTS = 5
+#: A ball around a vertex holding its whole strip: |(1/2, 1/10, 1)| < 1.13.
+STRIP_RADIUS = 1.13
 
 
 class BorderFit(NamedTuple):
@@ -96,8 +100,7 @@ def fit_border(vertices, triangles, points, flat_angle: float = FLAT_ANGLE) -> B
     for a, b in sharp.edges[sharp.layers == 1].tolist():
         neighbours.setdefault(a, []).append(b)
         neighbours.setdefault(b, []).append(a)
-    normal = np.cross(vertices[triangles[:, 1]] - vertices[triangles[:, 0]],
-                      vertices[triangles[:, 2]] - vertices[triangles[:, 0]])
+    normal = face_normals(vertices[triangles])
     length = np.linalg.norm(normal, axis=1)
     normal = np.divide(normal, length[:, None], out=np.zeros_like(normal), where=length[:, None] > 0)
     facets: dict[int, list[int]] = {}
@@ -105,16 +108,17 @@ def fit_border(vertices, triangles, points, flat_angle: float = FLAT_ANGLE) -> B
         for v in row:
             facets.setdefault(v, []).append(f)
     cos_flat = np.cos(np.radians(flat_angle))
+    tree = cKDTree(points)
     moved = []
     for v in sorted(neighbours):
-        step = _step(v, neighbours[v], vertices, triangles, normal, facets.get(v, []), points, cos_flat)
+        step = _step(v, neighbours[v], vertices, triangles, normal, facets.get(v, []), points, tree, cos_flat)
         if step is not None:
             out[v] = vertices[v] + step
             moved.append(v)
     return BorderFit(out, np.asarray(moved, np.int64))
 
 
-def _step(v, neighbours, vertices, triangles, normal, facets, points, cos_flat) -> np.ndarray | None:
+def _step(v, neighbours, vertices, triangles, normal, facets, points, tree, cos_flat) -> np.ndarray | None:
     """The move of border vertex ``v``, or ``None`` if it stays (not flat,
     fewer than two border neighbours, a degenerate facet or too few points)."""
     if len(neighbours) < 2 or not facets:
@@ -139,7 +143,7 @@ def _step(v, neighbours, vertices, triangles, normal, facets, points, cos_flat) 
     if (centre - vertices[v]) @ across > 0:
         across = -across
     reach = min(np.linalg.norm(vertices[u] - vertices[v]), np.linalg.norm(vertices[w] - vertices[v]))
-    d = points - vertices[v]
+    d = points[tree.query_ball_point(vertices[v], STRIP_RADIUS * reach)] - vertices[v]
     t, h, o = d @ along, d @ axis, d @ across
     strip = (np.abs(t) <= reach / 2) & (np.abs(h) <= reach / 10) & (np.abs(o) <= reach)
     if strip.sum() < MIN_POINTS:

@@ -98,6 +98,17 @@ def test_vertices_on_a_crease_stay_and_the_others_move_out():
                                                                                          vertices[far, 2]))
 
 
+def test_the_strip_reaches_its_corners_and_no_further():
+    v, t = grid_square(3, 0.1)  # step 0.4: vertex 3 at (0.5, 0.1) has the strip |x - 0.5| <= 0.2, 0 <= 0.1 - y <= 0.4
+    g = np.linspace(0.1, 0.9, 17)
+    inside = np.c_[np.stack(np.meshgrid(g, g), -1).reshape(-1, 2), np.zeros(17 * 17)]  # ends at the mesh's border
+    corner = [0.5 + 0.19, 0.1 - 0.39, 0.0]  # in the strip, near its far corner
+    beside = [0.5 + 0.21, 0.1 - 0.395, 0.0]  # just outside it along the border
+    above = [0.5, 0.1 - 0.395, 0.041]  # just outside it off the plane
+    fit = fit_border(v, t, np.concatenate([inside, [corner, beside, above]]))
+    np.testing.assert_allclose(fit.vertices[3], [0.5, 0.1 - 0.39, 0.0], rtol=0, atol=1e-12)
+
+
 def test_nothing_moves_without_triangles_or_points():
     v, t = grid_square(3, 0.1)
     assert fit_border(v, t, np.zeros((0, 3))).moved.size == 0
