@@ -162,12 +162,19 @@ class _Ring:
     def blocking(self) -> list[tuple[float, int]]:
         """``(cut, k)`` of the polygon edges ``k`` that block the target,
         by decreasing cut."""
-        poly, n, target = self.poly, len(self.poly), self.target
+        poly, target = self.poly, self.target
+        # The caches read inline: blocking runs once per clip over every edge.
+        sides, cuts = self._side, self._cut
         out = []
-        for k in range(n):
-            a, b = poly[k], poly[(k + 1) % n]
-            if target not in (a, b) and self.side(a, b) <= 0:
-                out.append((self.cut(a, b), k))
+        for k, (a, b) in enumerate(zip(poly, poly[1:] + poly[:1])):
+            if a == target or b == target:
+                continue
+            side = sides.get((a, b))
+            if side is None:
+                side = self.side(a, b)
+            if side <= 0:
+                cut = cuts.get((a, b))
+                out.append((self.cut(a, b) if cut is None else cut, k))
         out.sort(key=lambda t: (-t[0], t[1]))
         return out
 

@@ -117,6 +117,9 @@ class TransportPlan:
       pt_face: ``(n,)`` triangle id of each point.
       face_pts: per triangle id, the ids of its points (increasing).
       pt_edge: ``(n, 2)`` edge key each point is assigned to.
+      pt_code: ``(n,)`` int64 code ``min * V + max`` of ``pt_edge`` (``V``
+        vertices in the triangulation): one gather where regions compare
+        edges.
       edge_cost, edge_solid: per edge key holding points, its cost and
         whether it keeps its points (solid) or sends them to its ends (ghost).
       edge_normal: per edge key holding points, the normal part ``N`` of
@@ -135,6 +138,7 @@ class TransportPlan:
         for f, chunk in zip(faces, np.split(order, starts[1:])):
             self.face_pts[int(f)] = chunk
         self.pt_edge = self._nearest_edges(np.arange(len(self.points)))
+        self.pt_code = self.pt_edge[:, 0] * len(tri.xy) + self.pt_edge[:, 1]
         self.edge_cost: dict[tuple[int, int], float] = {}
         self.edge_solid: dict[tuple[int, int], bool] = {}
         self.edge_normal: dict[tuple[int, int], float] = {}
@@ -234,6 +238,8 @@ class TransportPlan:
             for f, chunk in zip(uf, np.split(inside[order], st[1:])):
                 self.face_pts[int(f)] = chunk
         self.pt_edge[cand.point_ids] = np.take(cand.keys, scored.assignment, axis=0)
+        self.pt_code[cand.point_ids] = np.take(cand.keys[:, 0] * len(self.tri.xy) + cand.keys[:, 1],
+                                               scored.assignment)
         for k, c, n, solid in zip(map(tuple, cand.keys.tolist()), scored.edge_cost.tolist(),
                                   scored.normal.tolist(), scored.solid.tolist()):
             self.edge_cost[k] = c

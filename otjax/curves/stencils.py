@@ -54,7 +54,8 @@ class Job(NamedTuple):
 
     Attributes:
       plan: the :class:`CollapsePlan` or :class:`MovePlan`.
-      triangles: ``(T, 3)`` int64 ``plan.new_triangles``.
+      triangles: ``(T, 3)`` vertex ids of ``plan.new_triangles``: the
+        plan's tuple of triples, or an int64 array.
       region: the :class:`Region` of ``plan.source`` (or its subsequence, for
         a partial update).
       moved: the new position of ``plan.source`` for a move, else ``None``.
@@ -145,14 +146,14 @@ class PlanEntry(NamedTuple):
       source_stamp, target_stamp: the star versions of its two ends it was made at.
       flips: its ``Flips``, or ``None`` when the collapse cannot be planned.
       plan: its ``CollapsePlan``, or ``None`` (no flips, or the link condition fails).
-      new_triangles: ``(T, 3)`` int64 triangles the collapse makes, or ``None`` with ``plan``.
+      new_triangles: ``plan.new_triangles`` (read once), or ``None`` with ``plan``.
     """
 
     source_stamp: int
     target_stamp: int
     flips: object
     plan: CollapsePlan | None
-    new_triangles: np.ndarray | None
+    new_triangles: tuple | None
 
 
 def _plan_entry(tri, source: int, target: int, stamps: tuple[int, int], flips, old_plan=None,
@@ -171,7 +172,8 @@ def _plan_entry(tri, source: int, target: int, stamps: tuple[int, int], flips, o
             return PlanEntry(*stamps, flips, old_plan, old_triangles)
         return PlanEntry(*stamps, flips, None, None)
     plan = plan_from_flips(tri, source, target, flips)
-    return PlanEntry(*stamps, flips, plan, None if plan is None else np.asarray(plan.new_triangles, np.int64))
+    # The triangles stay tuples: the export reads a batch's at once.
+    return PlanEntry(*stamps, flips, plan, None if plan is None else plan.new_triangles)
 
 
 class StencilCache:
@@ -258,13 +260,13 @@ class StencilCache:
             codes.append(a * nv + b if a < b else b * nv + a)
         inside = np.concatenate([face_pts[f] for f in star])
         # Of the points across each link edge, those assigned to that edge
-        # (edges compared by their code min * V + max).
+        # (edges compared by their code min * V + max). Link index and code
+        # are repeated together: each NumPy call costs more than its rows here.
         ids = np.concatenate(across)
-        link = np.repeat(np.arange(len(ring)), counts)
-        code = np.repeat(np.array(codes, np.int64), counts)
-        e = np.take(plan.pt_edge, ids, axis=0)
-        keep = e[:, 0] * nv + e[:, 1] == code
-        region = Region(ring, star, inside, ids[keep], link[keep], before, code[keep])
+        link_code = np.repeat(np.array((range(len(ring)), codes), np.int64), counts, axis=1)
+        keep = plan.pt_code[ids] == link_code[1]
+        kept = link_code[:, keep]
+        region = Region(ring, star, inside, ids[keep], kept[0], before, kept[1])
         self._regions[v] = (version, region)
         return region
 
@@ -310,4 +312,4 @@ class StencilCache:
             if not tri.in_kernel_at(ring, position):
                 continue
             plan = MovePlan(v, ring, star)
-            yield Job(plan, np.asarray(plan.new_triangles, np.int64), self.region(v), position, None)
+            yield Job(plan, plan.new_triangles, self.region(v), position, None)
