@@ -15,6 +15,14 @@ import numpy as np
 
 Key = tuple[int, int]
 
+# Stale heap items are skipped when they surface; once the heap holds this
+# many times the items left by the last sweep (plus COMPACT_MIN), a sweep
+# drops them all at once: one cheap test each instead of a pop down a heap
+# several times too deep. The pop order is the same (items are totally
+# ordered: the tie key and stamp are unique).
+COMPACT_FACTOR = 2
+COMPACT_MIN = 4096
+
 
 class ScoreTable:
     """Scores keyed by half-edge ``(source, target)``, and a lazy min-heap.
@@ -36,6 +44,7 @@ class ScoreTable:
         # Each entry's stamp: a heap item of an entry replaced at the same
         # version is stale too.
         self._stamp = itertools.count()
+        self._compact_at = COMPACT_MIN
 
     def fresh(self, key: Key) -> bool:
         """Whether ``key`` has a score at its source's current version."""
@@ -55,6 +64,8 @@ class ScoreTable:
         if self.use_heap:
             for key in sorted((key for key, _ in scored), key=order):
                 self.push(key)
+            if len(self.heap) > self._compact_at:
+                self._compact()
 
     def push(self, key: Key) -> None:
         """Puts ``key`` on the heap at its current score."""
@@ -73,6 +84,18 @@ class ScoreTable:
                 continue
             return key
         return None
+
+    def _compact(self) -> None:
+        """Drops the stale heap items (stale for good: versions and stamps only grow)."""
+        entries, versions = self.entries, self.versions
+        kept = []
+        for item in self.heap:
+            entry = entries.get(item[2])
+            if entry is not None and entry[2] == item[4] and item[3] == versions[item[2][0]]:
+                kept.append(item)
+        heapq.heapify(kept)
+        self.heap = kept
+        self._compact_at = COMPACT_FACTOR * len(kept) + COMPACT_MIN
 
     def discard(self, keys) -> None:
         """Drops the entries of ``keys`` (taken to be applied)."""
