@@ -65,6 +65,9 @@ def add_surface_parsers(sub) -> None:
                    "1: keep the decimation's bins)")
     p.add_argument("--background", choices=("auto", "none"), default="auto",
                    help="estimate uniform background noise and discount it (auto, the default) or not")
+    p.add_argument("--no-feature-fit", dest="fit_features", action="store_false",
+                   help="leave crease and open-border vertices where the transport put them (default: fit them "
+                   "to the points' planes and ends)")
     _outputs(p)
     p.set_defaults(run=_run_surface, usage=p.error)
 
@@ -109,10 +112,11 @@ def _run_surface(args, usage) -> int:
     solver = surface_solver(args.solver)
     params = {"n_vertices": n_vertices, "queue": args.queue, "seed": args.seed, "solver": solver,
               "bin_density": args.bin_density, "final_density_factor": args.final_density_factor,
-              "background": args.background}
+              "background": args.background, "fit_features": args.fit_features}
     run = reconstruct_surface(points, masses, n_vertices, queue=args.queue, seed=args.seed, solver=solver,
                               bin_density=args.bin_density, final_density_factor=args.final_density_factor,
-                              background=args.background, progress=not args.quiet)
+                              background=args.background, fit_features=args.fit_features,
+                              progress=not args.quiet)
     result = run.to_result(params)
     return _finish(result, args, outputs)
 

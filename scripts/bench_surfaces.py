@@ -107,7 +107,7 @@ def run_one(args) -> dict:
     crease = metrics3d.crease_error(run.vertices, run.triangles, sample.truth.creases)
     st = run.stats.seconds
     split = {"init": run.seconds["initial"] + run.seconds["rebin"], "scoring": st["export"] + st["score"],
-             "collapse": st["apply"], "relocation": st["relocate"] + run.seconds["final_relocation"]}
+             "collapse": st["apply"], "relocation": st["relocate"] + run.seconds["final_relocation"] + run.seconds["feature_fit"]}
     split["other"] = wall - sum(split.values())
     return {"shape": args.shape, "noise": args.noise, "points": args.points[0], "vertices": len(run.vertices),
             "initial_vertices": len(run.complex.alive), "queue": args.queue, "solver": surface_solver(args.solver),

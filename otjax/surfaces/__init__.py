@@ -21,9 +21,10 @@ simplicial complex, for research code and notebooks.
   with local re-solves, gradient refinement.
 - :func:`filter_facets`, :func:`facet_density` -- facet filtering by mass
   density (§4.4).
-- :func:`fit_border` -- flat open-border vertices moved out to where the
-  points end (not in the paper; a step to run on a result, not part of
-  :func:`reconstruct_surface`).
+- :func:`fit_creases`, :func:`fit_border` -- crease vertices moved onto the
+  planes of the points around them, flat open-border vertices out to where
+  the points end (not in the paper; the last step of
+  :func:`reconstruct_surface`, ``fit_features=True``).
 - :class:`SurfaceResult` -- a reconstructed surface: arrays, densities,
   ``.save()`` (``.ply``, ``.obj``, ``.off``, ``.json``), ``.plot()``.
 - :func:`recover_features` -- pull a smooth mesh's vertices onto the creases
@@ -39,6 +40,7 @@ The LP layer itself (padded batches, solvers, statuses) is :mod:`otjax.lp`.
 from otjax.surfaces.bins import FacetBins, bin_positions, facet_bins
 from otjax.surfaces.border_fit import BorderFit, fit_border
 from otjax.surfaces.complex import CollapseChange, ComplexArrays, LocalComplex, SimplicialComplex
+from otjax.surfaces.crease_fit import CreaseFit, fit_creases
 from otjax.surfaces.engine import SurfaceEngine
 from otjax.surfaces.features import FeatureRecovery, PassStats, recover_features
 from otjax.surfaces.filtering import FacetDensity, FilteredComplex, facet_density, filter_facets
@@ -53,10 +55,10 @@ from otjax.surfaces.result import SurfaceResult
 from otjax.surfaces.solvers import LocalSolver, exact_solver
 
 __all__ = [
-    "BinSettings", "BorderFit", "CollapseChange", "ComplexArrays", "FacetBins", "FacetDensity", "FeatureRecovery", "FilteredComplex",
+    "BinSettings", "BorderFit", "CollapseChange", "ComplexArrays", "CreaseFit", "FacetBins", "FacetDensity", "FeatureRecovery", "FilteredComplex",
     "InitialComplex", "LocalComplex", "LocalSolution", "LocalSolver", "PassStats", "RefineStats", "RelaxationStats",
     "RelocationStats", "SimplicialComplex", "Stencil", "SurfaceEngine", "SurfacePlan", "SurfaceReconstruction",
     "SurfaceResult", "bin_positions",
-    "exact_solver", "facet_bins", "facet_density", "facet_ring", "filter_facets", "fit_border", "initial_complex",
+    "exact_solver", "facet_bins", "facet_density", "facet_ring", "filter_facets", "fit_border", "fit_creases", "initial_complex",
     "initial_settings", "plan_segments", "plot_complex", "reconstruct_surface", "recover_features", "refine", "relax", "relocate", "relocation_targets",
 ]

@@ -11,8 +11,10 @@ point of a strip beside it. Vertices on creases and where a border meets
 a crease are left where they are. The farthest point decides: give the
 points without their outliers.
 
-A border edge is an edge of one sheet: a fold of two facets lying over
-each other counts as one sheet (:func:`otjax.metrics3d.edge_sharpness`).
+A border edge is an edge of one facet. Where two facets on an edge lie
+over each other (a fold, :func:`otjax.metrics3d.edge_sharpness`) the
+doubled patch ends too, but inside a closed surface that end is no border:
+folds are left alone.
 Every decision is taken on the positions given; the vertices move
 together. The rule uses lengths relative to the vertex's own border
 edges, so scaling, rotating or translating the input moves the result
@@ -26,8 +28,8 @@ from typing import NamedTuple
 import numpy as np
 from scipy.spatial import cKDTree
 
-from otjax.metrics3d import edge_sharpness
-from otjax.surfaces.star_plan import face_normals
+from otjax.metrics3d import boundary_edges
+from otjax.surfaces.fit_input import checked, unit_normals, vertex_facets, without_flattening
 
 #: Largest angle, in degrees, between two facets of a vertex that still
 #: counts as flat (docs/decisions.md#border_fit).
@@ -63,6 +65,8 @@ def fit_border(vertices, triangles, points, flat_angle: float = FLAT_ANGLE) -> B
     ``|(p - v).out| <= L``; with at least :data:`MIN_POINTS` of them, ``v``
     moves by ``max (p - v).out`` along ``out`` (outward, or inward where
     the points end before it).
+    Moves that would flatten a triangle are undone
+    (:func:`~otjax.surfaces.fit_input.without_flattening`).
 
     Args:
       vertices: ``(V, 3)`` vertex positions.
@@ -95,18 +99,12 @@ def fit_border(vertices, triangles, points, flat_angle: float = FLAT_ANGLE) -> B
     out = vertices.copy()
     if not len(triangles) or not len(points):
         return BorderFit(out, np.zeros(0, np.int64))
-    sharp = edge_sharpness(vertices, triangles)
     neighbours: dict[int, list[int]] = {}
-    for a, b in sharp.edges[sharp.layers == 1].tolist():
+    for a, b in boundary_edges(triangles).tolist():
         neighbours.setdefault(a, []).append(b)
         neighbours.setdefault(b, []).append(a)
-    normal = face_normals(vertices[triangles])
-    length = np.linalg.norm(normal, axis=1)
-    normal = np.divide(normal, length[:, None], out=np.zeros_like(normal), where=length[:, None] > 0)
-    facets: dict[int, list[int]] = {}
-    for f, row in enumerate(triangles.tolist()):
-        for v in row:
-            facets.setdefault(v, []).append(f)
+    normal = unit_normals(vertices, triangles)
+    facets = vertex_facets(triangles)
     cos_flat = np.cos(np.radians(flat_angle))
     tree = cKDTree(points)
     moved = []
@@ -115,7 +113,7 @@ def fit_border(vertices, triangles, points, flat_angle: float = FLAT_ANGLE) -> B
         if step is not None:
             out[v] = vertices[v] + step
             moved.append(v)
-    return BorderFit(out, np.asarray(moved, np.int64))
+    return BorderFit(*without_flattening(vertices, out, triangles, np.asarray(moved, np.int64)))
 
 
 def _step(v, neighbours, vertices, triangles, normal, facets, points, tree, cos_flat) -> np.ndarray | None:
@@ -165,19 +163,6 @@ def _straightest(v: int, neighbours: list[int], vertices: np.ndarray) -> tuple[i
 
 def _checked(vertices, triangles, points, flat_angle):
     """The arrays as float64 / int64, checked (see :func:`fit_border`)."""
-    vertices = np.asarray(vertices, np.float64)
-    points = np.asarray(points, np.float64)
-    triangles = np.asarray(triangles)
-    if vertices.ndim != 2 or vertices.shape[1] != 3 or not np.isfinite(vertices).all():
-        raise ValueError(f"vertices must be a finite (V, 3) array, got shape {vertices.shape}")
-    if points.ndim != 2 or points.shape[1] != 3 or not np.isfinite(points).all():
-        raise ValueError(f"points must be a finite (n, 3) array, got shape {points.shape}")
-    if len(triangles) == 0:
-        triangles = np.zeros((0, 3), np.int64)
-    if triangles.ndim != 2 or triangles.shape[1] != 3 or not np.issubdtype(triangles.dtype, np.integer):
-        raise ValueError(f"triangles must be an integer (T, 3) array, got shape {triangles.shape}")
-    if len(triangles) and (triangles.min() < 0 or triangles.max() >= len(vertices)):
-        raise ValueError(f"triangles index vertices 0..{len(vertices) - 1}, got {triangles.min()}..{triangles.max()}")
     if isinstance(flat_angle, bool) or not np.isscalar(flat_angle) or not 0 < float(flat_angle) < 90:
         raise ValueError(f"flat_angle must be a number of degrees in (0, 90), got {flat_angle!r}")
-    return vertices, triangles.astype(np.int64), points
+    return checked(vertices, triangles, points)

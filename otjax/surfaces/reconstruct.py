@@ -23,7 +23,9 @@ from otjax.decimation.loop import QUEUES, DecimationStats, decimate
 from otjax.decimation.relocation import relocate
 from otjax.frame import to_canonical
 from otjax.surfaces.bins import DEFAULT_DENSITY, facet_areas
+from otjax.surfaces.border_fit import fit_border
 from otjax.surfaces.complex import SimplicialComplex
+from otjax.surfaces.crease_fit import fit_creases
 from otjax.surfaces.engine import SurfaceEngine
 from otjax.surfaces.initial_complex import FRACTION, initial_complex, initial_settings
 from otjax.surfaces.plan import BinSettings, Entries, SurfacePlan
@@ -67,9 +69,9 @@ class SurfaceReconstruction(NamedTuple):
       complex: its :class:`SimplicialComplex` (canonical frame).
       vertex_ids: ``(V,)`` int64 id of each vertex row in ``complex``.
       stats: the :class:`DecimationStats` (``relocations``: moves
-        applied during the decimation and in the final passes).
+        applied during the decimation, in the final passes and by the feature fit).
       seconds: wall time of ``initial``, ``rebin``, ``decimation``,
-        ``final_rebin``, ``final_relocation``.
+        ``final_rebin``, ``final_relocation``, ``feature_fit``.
     """
 
     vertices: np.ndarray
@@ -100,7 +102,7 @@ def reconstruct_surface(points, masses=None, n_vertices: int = 100, *, queue: st
                         fraction: float = FRACTION, bin_density: float = DEFAULT_DENSITY, rebin: bool = REBIN,
                         max_sweeps: int = 10, background: str = "auto",
                         relocation: int | None = RELOCATE_LAST, final_relocations: int = FINAL_RELOCATIONS,
-                        final_density_factor: float = FINAL_DENSITY_FACTOR,
+                        final_density_factor: float = FINAL_DENSITY_FACTOR, fit_features: bool = True,
                         progress: bool = False) -> SurfaceReconstruction:
     """Reconstructs a surface (triangles, plus edges and isolated vertices) from 3D points.
 
@@ -113,29 +115,28 @@ def reconstruct_surface(points, masses=None, n_vertices: int = 100, *, queue: st
       switch_factor: multiple choice hands over to the exhaustive queue
         below this many times ``n_vertices`` (1: never, as in the paper).
       seed: seeds the subset, bins and draws; same seed, same result.
-      solver: ``"batched"`` (JAX batches, HiGHS for members they do not
-        certify) or ``"exact"`` (HiGHS for every local LP); ``None``
-        (default): :func:`surface_solver`, HiGHS on a CPU.
+      solver: ``"batched"`` (JAX batches, HiGHS for members they do not certify) or ``"exact"`` (HiGHS
+        for every local LP); ``None`` (default): :func:`surface_solver`, HiGHS on a CPU.
       fraction: share of the points in the initial Delaunay (§4.1).
-      bin_density: facet bins per squared bbox diagonal of facet area (the
-        paper's quadrature; 1 to 32 bins a facet). Higher: a finer cost and
-        sharper creases at small budgets, larger LPs (docs/benchmarks.md).
+      bin_density: facet bins per squared bbox diagonal of facet area (the paper's quadrature; 1 to 32 bins
+        a facet). Higher: a finer cost and sharper creases at small budgets, larger LPs (docs/benchmarks.md).
       rebin: give every facet the default bins before decimating.
       max_sweeps: relaxation sweeps of the initial complex at most.
       background: ``"auto"``: uniform background noise (:func:`otjax.background.estimate_background`) discounted:
         masses times shape shares (:func:`~otjax.background.shape_weights`), points of none or off the plane
         of their neighbours (:func:`~otjax.background.near_shape`) left out; ``"none"``: all transported.
-      relocation: relocate the vertex a collapse keeps and its neighbours
-        (§4.3: alternations of the closed-form target, a move half way
-        there, a re-solve of its star; kept where the cost falls) after
-        each of the last ``relocation`` collapses (default
-        :data:`RELOCATE_LAST`); ``None``: after every collapse, as the
-        paper does; 0: never during the decimation. Without relocation the vertices stay input points.
+      relocation: relocate the vertex a collapse keeps and its neighbours (§4.3: alternations of the
+        closed-form target, a move half way there, a re-solve of its star; kept where the cost falls) after
+        each of the last ``relocation`` collapses (default :data:`RELOCATE_LAST`); ``None``: after every
+        collapse, as the paper does; 0: never during the decimation.
       final_relocations: relocation passes over every vertex after the
         decimation (fewer if a pass moves none; 0: none).
       final_density_factor: the facets' bins before those passes, in multiples of ``bin_density``, the
         transport relaxed on them (the result's cost is on these; 1: the decimation's): a finer quadrature
         sharpens creases and corners (docs/decisions.md#final_density).
+      fit_features: where no background was found, then move crease vertices onto the points' planes
+        (:func:`~otjax.surfaces.fit_creases`), flat open-border ones out to the last points
+        (:func:`~otjax.surfaces.fit_border`), and relax the transport (docs/decisions.md#feature_fit).
       progress: show a progress bar.
 
     Returns:
@@ -153,10 +154,9 @@ def reconstruct_surface(points, masses=None, n_vertices: int = 100, *, queue: st
     solver = surface_solver(solver)
     points, masses = _checked(points, masses, n_vertices, queue, choices, switch_factor, solver, fraction,
                               bin_density, final_density_factor, background)
-    seed = check_number("seed", seed, integer=True)
-    relocation = check_number("relocation", relocation, minimum=0, integer=True, allow_none=True)
-    final_relocations = check_number("final_relocations", final_relocations, minimum=0, integer=True)
-    frame, q, m = to_canonical(*_shape_part(points, masses, background))
+    seed, relocation, final_relocations = _checked_counts(seed, relocation, final_relocations)
+    shape = _shape_part(points, masses, background)
+    frame, q, m = to_canonical(shape.points, shape.masses)
     method = "auto" if solver == "batched" else "exact"
     with jax.enable_x64(True):
         plan = _initial_plan(q, m, method, fraction, seed, max_sweeps, bin_density, n_vertices)
@@ -166,14 +166,16 @@ def reconstruct_surface(points, masses=None, n_vertices: int = 100, *, queue: st
                             LocalSolver(method))
         seconds.lap("rebin")
         engine = SurfaceEngine(plan, method=method)
-        every = plan.complex.n_vertices  # more than the collapses: relocate after each
+        every = plan.complex.n_vertices if relocation is None else relocation  # None: more than the collapses
         stats = decimate(engine, n_vertices, queue=queue, choices=choices, switch_factor=switch_factor, seed=seed,
-                         relocation=every if relocation is None else relocation, progress=progress)
+                         relocation=every, progress=progress)
         seconds.lap("decimation")
         engine = _finer(engine, final_density_factor, method, changed=close_t_junctions(engine.plan) > 0)
         seconds.lap("final_rebin")
         stats.relocations += _final_passes(engine, final_relocations)
         seconds.lap("final_relocation")
+        stats.relocations += _fit_features(engine.plan, q, fit_features and not shape.background, method)
+        seconds.lap("feature_fit")
     return _result(engine.plan, frame, stats, dict(seconds))
 
 
@@ -233,19 +235,52 @@ def surface_solver(solver: str | None) -> str:
     return "exact" if default_solver() == "exact" else "batched"
 
 
-def _shape_part(points: np.ndarray, masses: np.ndarray | None, background: str):
-    """``(points, masses)`` to transport: with ``background="auto"``, where the
-    points hold uniform background noise, each mass scaled by its point's
+class ShapePart(NamedTuple):
+    """The points to transport: ``points (n, 3)``, ``masses (n,)`` (``None``:
+    ones) and whether uniform ``background`` noise was found and discounted."""
+
+    points: np.ndarray
+    masses: np.ndarray | None
+    background: bool
+
+
+def _shape_part(points: np.ndarray, masses: np.ndarray | None, background: str) -> ShapePart:
+    """The :class:`ShapePart` of the input: with ``background="auto"``, where
+    the points hold uniform background noise, each mass scaled by its point's
     share of shape and the points of none (or off the flat through their
     neighbours: :func:`otjax.background.near_shape`) left out; else as given."""
     if background == "none":
-        return points, masses
+        return ShapePart(points, masses, False)
     found = estimate_background(points)
     if not found.found:
-        return points, masses
+        return ShapePart(points, masses, False)
     weights = shape_weights(found)
     keep = (weights > 0) & near_shape(points, weights)
-    return points[keep], (np.ones(len(points)) if masses is None else masses)[keep] * weights[keep]
+    return ShapePart(points[keep], (np.ones(len(points)) if masses is None else masses)[keep] * weights[keep], True)
+
+
+def _fit_features(plan: SurfacePlan, points: np.ndarray, fit: bool, method: str) -> int:
+    """With ``fit``, moves the complex's crease vertices and then its flat
+    open-border vertices to the canonical ``points``, then relaxes the
+    transport on the moved complex; the number of vertices moved."""
+    if not fit:
+        return 0
+    arrays = plan.complex.to_arrays()
+    fitted = fit_creases(arrays.vertices, arrays.triangles, points).vertices
+    fitted = fit_border(fitted, arrays.triangles, points).vertices
+    moved = np.flatnonzero(np.any(fitted != arrays.vertices, axis=1))
+    for row in moved.tolist():
+        plan.complex.move(int(arrays.vertex_ids[row]), fitted[row])
+    if len(moved):
+        relax(plan, LocalSolver(method), max_sweeps=REBIN_SWEEPS)
+    return len(moved)
+
+
+def _checked_counts(seed, relocation, final_relocations) -> tuple[int, int | None, int]:
+    """``(seed, relocation, final_relocations)`` checked and as ints (:func:`reconstruct_surface`)."""
+    return (check_number("seed", seed, integer=True),
+            check_number("relocation", relocation, minimum=0, integer=True, allow_none=True),
+            check_number("final_relocations", final_relocations, minimum=0, integer=True))
 
 
 def _checked(points, masses, n_vertices, queue, choices, switch_factor, solver, fraction, bin_density,

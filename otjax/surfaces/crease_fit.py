@@ -1,0 +1,245 @@
+"""Crease vertices moved onto the planes of the points around them (not in the paper).
+
+The transport cost settles a vertex on a crease a little off it: its
+facets are fitted to the points by bins, a coarse quadrature, and a
+vertex's own bin takes the points nearest to it. :func:`fit_creases` fits
+a plane to the points on each side of a crease vertex and moves the vertex
+to where those planes meet: onto their line (two planes) or their common
+point (three planes, a corner), if each plane has points next to that
+target: a crease of the points, not of the complex alone.
+
+Which side a point is on is decided the way k-means decides a cluster:
+the planes start as the facets' (facets grouped by normal), each point
+joins the nearest, each plane is refitted to its points (least squares),
+and points farther from their plane than :data:`TRIM` times its residual
+leave it, so points of a third surface nearby (the next face of a box,
+the other end of a crease) fall away from the fit. Every decision is
+taken on the positions given; the vertices move together. All lengths
+are relative to the vertex's own edges, so scaling, rotating or
+translating the input moves the result with it.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from otjax.metrics3d import edge_sharpness
+from otjax.surfaces.fit_input import checked, unit_normals, vertex_facets, without_flattening
+
+#: Dihedral sharpness, in degrees, above which an edge is a crease
+#: (docs/decisions.md#feature_fit).
+SHARP_ANGLE = 60.0
+#: Facets or planes whose normals are within this many degrees are one
+#: plane; the fitted planes a vertex moves to are farther apart.
+PLANE_ANGLE = 30.0
+#: A point joins a plane's first fit within this many times ``r`` (the
+#: vertex's median edge length) of it.
+NEAR = 0.2
+#: A target farther than this many times ``r`` from the nearest point of
+#: one of its planes is no crease of the points (docs/decisions.md#feature_fit).
+GAP = 0.3
+#: Fewest points a plane is fitted to.
+MIN_POINTS = 5
+#: Points farther from their plane than this many times its root mean
+#: square residual leave its fit.
+TRIM = 3.0
+#: Rounds of assigning points to planes and refitting them.
+ROUNDS = 4
+
+
+class CreaseFit(NamedTuple):
+    """What :func:`fit_creases` returns.
+
+    Attributes:
+      vertices: ``(V, 3)`` float64 the positions after the fit.
+      moved: ``(m,)`` int64 rows of ``vertices`` that moved, increasing.
+    """
+
+    vertices: np.ndarray
+    moved: np.ndarray
+
+
+class _Planes(NamedTuple):
+    """Planes ``normal . x = offset``: ``normal (k, 3)`` unit, ``offset (k,)``;
+    a point within ``tolerance (k,)`` of its nearest plane belongs to it."""
+
+    normal: np.ndarray
+    offset: np.ndarray
+    tolerance: np.ndarray
+
+
+def fit_creases(vertices, triangles, points, sharp_angle: float = SHARP_ANGLE) -> CreaseFit:
+    """Moves the crease vertices of a complex onto the planes of the points.
+
+    A vertex on at least two edges sharper than ``sharp_angle`` (edges of
+    two or more triangles: :func:`otjax.metrics3d.edge_sharpness`) is a
+    crease vertex. Its facets are grouped by normal (within
+    :data:`PLANE_ANGLE`, in increasing row order); with ``r`` the median
+    length of its edges, the points within ``r`` of it are shared among
+    the groups' planes and the planes refitted (module doc; planes that
+    come within :data:`PLANE_ANGLE` of one another merge, planes with
+    fewer than :data:`MIN_POINTS` points drop). With two planes more than
+    :data:`PLANE_ANGLE` apart the target is the nearest point of their
+    line; with three (pairwise so), their common point. The vertex moves
+    there if the move is at most ``r / 2`` and every plane has a point of
+    its own within :data:`GAP` ``* r`` of the target.
+    Moves that would flatten a triangle are undone
+    (:func:`~otjax.surfaces.fit_input.without_flattening`).
+
+    Args:
+      vertices: ``(V, 3)`` vertex positions.
+      triangles: ``(T, 3)`` int rows into ``vertices``.
+      points: ``(n, 3)`` the points the complex was reconstructed from.
+      sharp_angle: degrees, in ``(0, 90)``.
+
+    Returns:
+      :class:`CreaseFit`.
+
+    Raises:
+      ValueError: arrays of the wrong shape, non-finite values, indices out
+        of range, ``sharp_angle`` outside ``(0, 90)``.
+    """
+    if isinstance(sharp_angle, bool) or not np.isscalar(sharp_angle) or not 0 < float(sharp_angle) < 90:
+        raise ValueError(f"sharp_angle must be a number of degrees in (0, 90), got {sharp_angle!r}")
+    vertices, triangles, points = checked(vertices, triangles, points)
+    out = vertices.copy()
+    if not len(triangles) or not len(points):
+        return CreaseFit(out, np.zeros(0, np.int64))
+    sharp = edge_sharpness(vertices, triangles)
+    creases = sharp.edges[(sharp.n_triangles > 1) & (sharp.angle > np.radians(sharp_angle))]
+    count = np.bincount(creases.ravel(), minlength=len(vertices))
+    normal = unit_normals(vertices, triangles)
+    facets = vertex_facets(triangles)
+    tree = cKDTree(points)
+    min_cos = np.cos(np.radians(PLANE_ANGLE))
+    moved = []
+    for v in np.flatnonzero(count >= 2).tolist():
+        own = np.array([f for f in facets[v] if np.any(normal[f])], np.int64)
+        target = _target(v, own, vertices, triangles, normal, points, tree, min_cos, np.radians(sharp_angle))
+        if target is not None:
+            out[v] = target
+            moved.append(v)
+    return CreaseFit(*without_flattening(vertices, out, triangles, np.asarray(moved, np.int64)))
+
+
+def _target(v, own, vertices, triangles, normal, points, tree, min_cos, sharp) -> np.ndarray | None:
+    """Where crease vertex ``v`` (facets ``own``) moves, or ``None`` if it stays."""
+    ring = np.setdiff1d(triangles[own], [v])
+    lengths = np.linalg.norm(vertices[ring] - vertices[v], axis=1)
+    if not len(lengths) or not lengths.min() > 0:
+        return None
+    reach = float(np.median(lengths))
+    near = points[tree.query_ball_point(vertices[v], reach)]
+    planes = _fitted(_facet_planes(own, vertices, triangles, normal), near, reach)
+    if planes is None or len(planes.normal) not in (2, 3):
+        return None
+    n, c, _ = planes
+    if np.any(np.abs(n @ n.T)[np.triu_indices(len(n), 1)] > min_cos):
+        return None
+    if len(n) == 2:  # the nearest point of the line n x = c
+        target = vertices[v] - n.T @ np.linalg.solve(n @ n.T, n @ vertices[v] - c)
+    else:
+        target = np.linalg.solve(n, c)
+    if np.linalg.norm(target - vertices[v]) > reach / 2 or _gap(planes, near, target) > GAP * reach:
+        return None
+    if _least_sharpness(planes, near, target) <= sharp:
+        return None
+    return target
+
+
+def _facet_planes(own, vertices, triangles, normal) -> _Planes:
+    """One plane per group of ``own`` facets with normals within
+    :data:`PLANE_ANGLE` (unsigned; the first facet of a group leads it):
+    the group's mean normal through its facets' mean corner."""
+    group = _groups(normal[own])
+    rows, offsets = [], []
+    for g in range(group.max() + 1):
+        n = normal[own[group == g]]
+        n = n * np.where(n @ n[0] < 0, -1.0, 1.0)[:, None]  # facets carry no consistent orientation
+        n = n.mean(0) / np.linalg.norm(n.mean(0))
+        rows.append(n)
+        offsets.append(vertices[triangles[own[group == g]]].mean(axis=(0, 1)) @ n)
+    return _Planes(np.array(rows), np.array(offsets), np.full(len(rows), np.inf))
+
+
+def _fitted(planes: _Planes, near: np.ndarray, reach: float) -> _Planes | None:
+    """``planes`` refitted to the points ``near`` (:data:`ROUNDS` rounds:
+    each point joins its nearest plane if within that plane's tolerance,
+    first :data:`NEAR` ``* reach``, then :data:`TRIM` residuals); ``None``
+    once fewer than two planes have points enough."""
+    planes = planes._replace(tolerance=np.full(len(planes.normal), NEAR * reach))
+    for _ in range(ROUNDS):
+        nearest, within = _members(planes, near)
+        rows, offsets, spread = [], [], []
+        for g in range(len(planes.normal)):
+            q = near[(nearest == g) & within]
+            if len(q) < MIN_POINTS:
+                continue
+            centre = q.mean(0)
+            n = np.linalg.eigh(np.cov((q - centre).T))[1][:, 0]  # the direction of least spread
+            rows.append(n)
+            offsets.append(n @ centre)
+            spread.append(max(TRIM * np.sqrt(np.mean((q @ n - n @ centre) ** 2)), 1e-6 * reach))
+        if len(rows) < 2:
+            return None
+        first = np.unique(_groups(np.array(rows)), return_index=True)[1]
+        planes = _Planes(np.array(rows)[first], np.array(offsets)[first], np.array(spread)[first])
+    return planes
+
+
+def _members(planes: _Planes, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(nearest (n,), within (n,))``: each point's nearest plane and
+    whether it is within that plane's tolerance."""
+    dist = np.abs(points @ planes.normal.T - planes.offset)
+    nearest = dist.argmin(1)
+    return nearest, dist[np.arange(len(points)), nearest] < planes.tolerance[nearest]
+
+
+def _least_sharpness(planes: _Planes, points: np.ndarray, target: np.ndarray) -> float:
+    """The smallest, over pairs of planes, sharpness (radians, ``pi`` less
+    the angle between the half planes) of the crease their members make
+    at ``target``: each half plane leaves the pair's line towards the
+    centre of its members (a curved sheet fitted by two planes opens wide,
+    an acute fold narrow)."""
+    nearest, within = _members(planes, points)
+    least = np.pi
+    for i, j in zip(*np.triu_indices(len(planes.normal), 1)):
+        line = np.cross(planes.normal[i], planes.normal[j])
+        line /= np.linalg.norm(line)
+        sides = []
+        for g in (i, j):
+            w = points[within & (nearest == g)].mean(0) - target
+            w -= (w @ line) * line + (w @ planes.normal[g]) * planes.normal[g]
+            sides.append(w / max(np.linalg.norm(w), np.finfo(np.float64).tiny))
+        least = min(least, np.pi - np.arccos(np.clip(sides[0] @ sides[1], -1.0, 1.0)))
+    return float(least)
+
+
+def _gap(planes: _Planes, points: np.ndarray, target: np.ndarray) -> float:
+    """The largest, over the planes, distance from ``target`` to the
+    plane's nearest member point: a crease of the points has points of
+    each side next to it."""
+    nearest, within = _members(planes, points)
+    d = np.linalg.norm(points - target, axis=1)
+    return max(float(d[within & (nearest == g)].min(initial=np.inf)) for g in range(len(planes.normal)))
+
+
+def _groups(normals: np.ndarray) -> np.ndarray:
+    """``(k,)`` group of each unit normal ``(k, 3)``: each joins the first
+    group whose leading normal is within :data:`PLANE_ANGLE` of it
+    (unsigned), or leads a new one; groups numbered in order of their leaders."""
+    cos = np.cos(np.radians(PLANE_ANGLE))
+    leaders: list[np.ndarray] = []
+    group = np.empty(len(normals), np.int64)
+    for i, n in enumerate(normals):
+        hit = [g for g, lead in enumerate(leaders) if abs(n @ lead) >= cos]
+        if hit:
+            group[i] = hit[0]
+        else:
+            group[i] = len(leaders)
+            leaders.append(n)
+    return group
+

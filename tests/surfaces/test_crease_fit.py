@@ -1,0 +1,166 @@
+"""Crease fitting (otjax.surfaces.crease_fit) against the exact creases and
+corners of the surfaces the points were sampled from."""
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from scipy.spatial.transform import Rotation
+
+from otjax.surfaces.crease_fit import fit_creases
+
+
+def folded_sheets(rows: int, opening: float, width: float):
+    """Two sheets meeting at the z axis (``0 <= z <= 1``) at ``opening``
+    radians, each ``width`` wide: a grid mesh of five columns (two a sheet
+    and the crease in the middle) and ``rows`` rows, two triangles a cell.
+    Returns ``(vertices, triangles, crease_rows, directions)``."""
+    u = {1: np.array([1.0, 0, 0]), -1: np.array([np.cos(opening), np.sin(opening), 0])}
+    z = np.linspace(0, 1, rows)
+    columns = (-2, -1, 0, 1, 2)
+    vertices = []
+    for i in range(rows):
+        for c in columns:
+            side = u[np.sign(c)] if c else np.zeros(3)
+            vertices.append(np.array([0, 0, z[i]]) + abs(c) * width / 2 * side)
+    tri = []
+    for i in range(rows - 1):
+        for j in range(len(columns) - 1):
+            a, b = i * 5 + j, i * 5 + j + 1
+            c, d = a + 5, b + 5
+            tri += [(a, b, d), (a, d, c)]
+    crease = np.array([i * 5 + 2 for i in range(rows)])
+    return np.array(vertices), np.array(tri), crease, u
+
+
+def sample_sheets(u: dict, width: float, n: int, rng) -> np.ndarray:
+    """``2 n`` points uniform on the two sheets (a little wider than the mesh)."""
+    out = []
+    for side in (1, -1):
+        t, z = rng.random(n) * width * 1.05, rng.random(n)
+        out.append(t[:, None] * u[side] + np.c_[np.zeros(n), np.zeros(n), z])
+    return np.concatenate(out)
+
+
+@settings(max_examples=100, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), rows=st.integers(4, 6), opening=st.floats(50, 100),
+       scale_exp=st.floats(-3, 3))
+def test_crease_vertices_move_onto_the_crease_in_any_frame(seed, rows, opening, scale_exp):
+    rng = np.random.default_rng(seed)
+    width = 0.6
+    vertices, triangles, crease, u = folded_sheets(rows, np.radians(opening), width)
+    points = sample_sheets(u, width, 1500, rng)
+    # The crease's end vertices are on one sharp edge only; an opening up to 100 degrees keeps the
+    # displaced crease edges sharper than 60 degrees.
+    inner = crease[1:-1]
+    shifted = vertices.copy()
+    shifted[inner] += rng.uniform(-0.03, 0.03, (len(inner), 3))
+    rotation, scale, shift = Rotation.random(random_state=seed % 2**32), 10.0 ** scale_exp, rng.normal(size=3)
+
+    def to_frame(x):
+        return rotation.apply(x) * scale + shift
+
+    fit = fit_creases(to_frame(shifted), triangles, to_frame(points))
+
+    assert fit.moved.tolist() == inner.tolist()
+    back = rotation.inv().apply((fit.vertices - shift) / scale)
+    # Onto the z axis, at the height of its nearest point there.
+    assert np.allclose(back[inner, :2], 0, atol=1e-3)
+    assert np.allclose(back[inner, 2], shifted[inner, 2], atol=1e-3)
+    others = np.setdiff1d(np.arange(len(vertices)), inner)
+    assert np.array_equal(fit.vertices[others], to_frame(shifted)[others])
+
+
+def corner_faces(step: float = 0.25, k: int = 3):
+    """The three faces of the unit cube at the origin, each a ``k x k`` grid
+    of spacing ``step`` (two triangles a cell), shared vertices merged.
+    Returns ``(vertices, triangles, corner_row)``."""
+    g = np.arange(k) * step
+    index, vertices, tri = {}, [], []
+
+    def vid(p):
+        key = tuple(np.round(p, 9))
+        if key not in index:
+            index[key] = len(vertices)
+            vertices.append(np.array(p, float))
+        return index[key]
+
+    for axis in range(3):
+        a, b = [x for x in range(3) if x != axis]
+        for i in range(k - 1):
+            for j in range(k - 1):
+                ids = []
+                for di, dj in ((0, 0), (1, 0), (1, 1), (0, 1)):
+                    p = np.zeros(3)
+                    p[a], p[b] = g[i + di], g[j + dj]
+                    ids.append(vid(p))
+                tri += [(ids[0], ids[1], ids[2]), (ids[0], ids[2], ids[3])]
+    return np.array(vertices), np.array(tri), index[(0.0, 0.0, 0.0)]
+
+
+def test_a_corner_vertex_moves_to_the_corner():
+    rng = np.random.default_rng(3)
+    vertices, triangles, corner = corner_faces()
+    points = []
+    for axis in range(3):
+        p = rng.random((1500, 3)) * 0.55
+        p[:, axis] = 0
+        points.append(p)
+    points = np.concatenate(points)
+    shifted = vertices.copy()
+    shifted[corner] = [0.02, -0.015, 0.01]
+
+    fit = fit_creases(shifted, triangles, points)
+
+    assert corner in fit.moved.tolist()
+    assert np.linalg.norm(fit.vertices[corner]) < 1e-6
+
+
+def test_a_fold_the_points_do_not_have_moves_nothing():
+    # The mesh folds at a right angle; the points lie on one of its sheets and the plane beyond the crease.
+    rng = np.random.default_rng(4)
+    vertices, triangles, crease, u = folded_sheets(5, np.radians(90), 0.6)
+    shifted = vertices.copy()
+    shifted[crease[1:-1]] += [0.02, 0.02, 0]
+    points = np.c_[rng.uniform(-0.6, 0.6, 3000), np.zeros(3000), rng.random(3000)]
+
+    fit = fit_creases(shifted, triangles, points)
+
+    assert len(fit.moved) == 0
+    assert np.array_equal(fit.vertices, shifted)
+
+
+def test_sheets_whose_points_stop_short_of_their_line_move_nothing():
+    # The points' planes meet at the z axis, but no point comes within a third of an edge of it.
+    rng = np.random.default_rng(5)
+    width = 0.6
+    vertices, triangles, crease, u = folded_sheets(5, np.radians(90), width)
+    points = sample_sheets(u, width, 3000, rng)
+    points = points[np.linalg.norm(points[:, :2], axis=1) > 0.11]  # edges here are 0.25 and 0.3 long
+    shifted = vertices.copy()
+    shifted[crease[1:-1]] += [0.02, 0.02, 0]
+
+    fit = fit_creases(shifted, triangles, points)
+
+    assert len(fit.moved) == 0
+
+
+def test_nothing_moves_without_triangles_or_points():
+    vertices, triangles, _, u = folded_sheets(4, np.radians(90), 0.6)
+    assert len(fit_creases(vertices, np.zeros((0, 3), int), np.ones((5, 3))).moved) == 0
+    assert len(fit_creases(vertices, triangles, np.zeros((0, 3))).moved) == 0
+
+
+@pytest.mark.parametrize("change, message", [
+    ({"vertices": np.ones((4, 2))}, "vertices must be"),
+    ({"points": np.full((3, 3), np.nan)}, "points must be"),
+    ({"triangles": np.array([[0, 1, 9]])}, "triangles index"),
+    ({"triangles": np.ones((2, 3))}, "integer"),
+    ({"sharp_angle": 90}, "sharp_angle"),
+    ({"sharp_angle": True}, "sharp_angle"),
+])
+def test_bad_input_is_named(change, message):
+    args = {"vertices": np.eye(3) + 1, "triangles": np.array([[0, 1, 2]]), "points": np.ones((4, 3)),
+            **change}
+    with pytest.raises(ValueError, match=message):
+        fit_creases(**args)
