@@ -13,7 +13,11 @@ the planes start as the facets' (facets grouped by normal), each point
 joins the nearest, each plane is refitted to its points (least squares),
 and points farther from their plane than :data:`TRIM` times its residual
 leave it, so points of a third surface nearby (the next face of a box,
-the other end of a crease) fall away from the fit. Every decision is
+the other end of a crease) fall away from the fit. A third plane is
+kept only if it is about as thin as the other two: where a facet of the
+complex lies across a crease's end, its plane can only gather the points
+of other faces, and made a corner of it the vertex slid along the
+crease. Every decision is
 taken on the positions given; the vertices move together. All lengths
 are relative to the vertex's own edges, so scaling, rotating or
 translating the input moves the result with it.
@@ -48,6 +52,12 @@ MIN_POINTS = 5
 TRIM = 3.0
 #: Rounds of assigning points to planes and refitting them.
 ROUNDS = 4
+#: Of three fitted planes, one whose root mean square residual exceeds this
+#: many times the least of them (or :data:`FLOOR` ``* r``, if larger) is no
+#: plane and drops (docs/decisions.md#feature_fit).
+THICK = 3.0
+#: The least residual :data:`THICK` compares with, in units of ``r``.
+FLOOR = 0.01
 
 
 class CreaseFit(NamedTuple):
@@ -83,7 +93,10 @@ def fit_creases(vertices, triangles, points, sharp_angle: float = SHARP_ANGLE) -
     come within :data:`PLANE_ANGLE` of one another merge, planes with
     fewer than :data:`MIN_POINTS` points drop). With two planes more than
     :data:`PLANE_ANGLE` apart the target is the nearest point of their
-    line; with three (pairwise so), their common point. The vertex moves
+    line; with three (pairwise so), their common point, unless one of
+    them is more than :data:`THICK` times as thick (root mean square
+    residual) as the thinnest: then it drops and the other two decide (if
+    two are, the vertex stays). The vertex moves
     there if the move is at most ``r / 2`` and every plane has a point of
     its own within :data:`GAP` ``* r`` of the target.
     Moves that would flatten a triangle are undone
@@ -187,7 +200,12 @@ def _fitted(planes: _Planes, near: np.ndarray, reach: float) -> _Planes | None:
             return None
         first = np.unique(_groups(np.array(rows)), return_index=True)[1]
         planes = _Planes(np.array(rows)[first], np.array(offsets)[first], np.array(spread)[first])
-    return planes
+    if len(planes.normal) != 3:
+        return planes
+    # A corner needs three planes: one much thicker than the thinnest holds
+    # the points of other faces that no plane took.
+    flat = planes.tolerance <= THICK * max(planes.tolerance.min(), TRIM * FLOOR * reach)
+    return _Planes(*(x[flat] for x in planes)) if flat.sum() >= 2 else None
 
 
 def _members(planes: _Planes, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

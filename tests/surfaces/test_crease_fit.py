@@ -116,6 +116,25 @@ def test_a_corner_vertex_moves_to_the_corner():
     assert np.linalg.norm(fit.vertices[corner]) < 1e-6
 
 
+def test_a_corner_of_one_exact_face_and_two_noisy_ones_moves_to_the_corner():
+    # Planes thin by different amounts are still three planes: the thinnest being exact must not
+    # make the others too thick to count.
+    rng = np.random.default_rng(8)
+    vertices, triangles, corner = corner_faces()
+    points = []
+    for axis, noise in ((0, 0.0), (1, 0.002), (2, 0.002)):
+        p = rng.random((1500, 3)) * 0.55
+        p[:, axis] = rng.normal(0.0, noise, 1500) if noise else 0.0
+        points.append(p)
+    shifted = vertices.copy()
+    shifted[corner] = [0.02, -0.015, 0.01]
+
+    fit = fit_creases(shifted, triangles, np.concatenate(points))
+
+    assert corner in fit.moved.tolist()
+    assert np.linalg.norm(fit.vertices[corner]) < 1e-3
+
+
 def test_a_fold_the_points_do_not_have_moves_nothing():
     # The mesh folds at a right angle; the points lie on one of its sheets and the plane beyond the crease.
     rng = np.random.default_rng(4)
@@ -143,6 +162,29 @@ def test_sheets_whose_points_stop_short_of_their_line_move_nothing():
     fit = fit_creases(shifted, triangles, points)
 
     assert len(fit.moved) == 0
+
+
+def test_a_facet_across_a_crease_end_makes_no_corner_of_other_faces():
+    # A crease ends at the open border z = 0, where a facet of the complex lies across it in the
+    # border's plane, so the end vertex has three groups of facets. Within its reach stand two more
+    # faces, parallel to the sheets (a staircase's next riser and tread), whose points no sheet's
+    # plane takes: the plane of the facet across, fitted to them, is far thicker than the sheets'
+    # and must not make the end a corner (the corner of three planes lies up the crease or nowhere).
+    rng = np.random.default_rng(7)
+    width = 0.6
+    vertices, triangles, crease, u = folded_sheets(5, np.radians(90), width)
+    end = crease[0]
+    triangles = np.vstack([triangles, [end, end - 1, end + 1]])
+    faces = [np.c_[rng.random(3000) * width, np.full(3000, 0.25), rng.random(3000)],
+             np.c_[np.full(3000, 0.25), rng.random(3000) * width, rng.random(3000)]]
+    points = np.concatenate([sample_sheets(u, width, 3000, rng), *faces])
+    shifted = vertices.copy()
+    shifted[end] = [0.01, -0.02, 0.005]
+
+    fit = fit_creases(shifted, triangles, points)
+
+    assert end in fit.moved.tolist()
+    assert np.allclose(fit.vertices[end], [0, 0, 0.005], atol=1e-3)
 
 
 def test_nothing_moves_without_triangles_or_points():
