@@ -16,8 +16,8 @@ leave it, so points of a third surface nearby (the next face of a box,
 the other end of a crease) fall away from the fit. A third plane is
 kept only if it is about as thin as the other two: where a facet of the
 complex lies across a crease's end, its plane can only gather the points
-of other faces, and made a corner of it the vertex slid along the
-crease. Every decision is
+of other faces, and taken for a corner it would slide the vertex along
+the crease. Every decision is
 taken on the positions given; the vertices move together. All lengths
 are relative to the vertex's own edges, so scaling, rotating or
 translating the input moves the result with it.
@@ -181,8 +181,9 @@ def _facet_planes(own, vertices, triangles, normal) -> _Planes:
 def _fitted(planes: _Planes, near: np.ndarray, reach: float) -> _Planes | None:
     """``planes`` refitted to the points ``near`` (:data:`ROUNDS` rounds:
     each point joins its nearest plane if within that plane's tolerance,
-    first :data:`NEAR` ``* reach``, then :data:`TRIM` residuals); ``None``
-    once fewer than two planes have points enough."""
+    first :data:`NEAR` ``* reach``, then :data:`TRIM` residuals), of
+    three the ones :data:`THICK` times thicker than the thinnest dropped;
+    ``None`` once fewer than two planes have points enough, or are thin."""
     planes = planes._replace(tolerance=np.full(len(planes.normal), NEAR * reach))
     for _ in range(ROUNDS):
         nearest, within = _members(planes, near)
