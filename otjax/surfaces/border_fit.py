@@ -23,13 +23,11 @@ with it.
 
 from __future__ import annotations
 
-from typing import NamedTuple
-
 import numpy as np
 from scipy.spatial import cKDTree
 
 from otjax.metrics3d import boundary_edges
-from otjax.surfaces.fit_input import checked, unit_normals, vertex_facets, without_flattening
+from otjax.surfaces.fit_input import VertexFit, checked, unit_normals, vertex_facets, without_flattening
 
 #: Largest angle, in degrees, between two facets of a vertex that still
 #: counts as flat (docs/decisions.md#border_fit).
@@ -40,16 +38,8 @@ MIN_POINTS = 5
 STRIP_RADIUS = 1.13
 
 
-class BorderFit(NamedTuple):
-    """What :func:`fit_border` returns.
-
-    Attributes:
-      vertices: ``(V, 3)`` float64 the positions after the fit.
-      moved: ``(m,)`` int64 rows of ``vertices`` that moved, increasing.
-    """
-
-    vertices: np.ndarray
-    moved: np.ndarray
+#: What :func:`fit_border` returns: the positions after the fit and the rows that moved.
+BorderFit = VertexFit
 
 
 def fit_border(vertices, triangles, points, flat_angle: float = FLAT_ANGLE) -> BorderFit:
@@ -98,7 +88,7 @@ def fit_border(vertices, triangles, points, flat_angle: float = FLAT_ANGLE) -> B
     vertices, triangles, points = _checked(vertices, triangles, points, flat_angle)
     out = vertices.copy()
     if not len(triangles) or not len(points):
-        return BorderFit(out, np.zeros(0, np.int64))
+        return VertexFit(out, np.zeros(0, np.int64))
     neighbours: dict[int, list[int]] = {}
     for a, b in boundary_edges(triangles).tolist():
         neighbours.setdefault(a, []).append(b)
@@ -113,7 +103,7 @@ def fit_border(vertices, triangles, points, flat_angle: float = FLAT_ANGLE) -> B
         if step is not None:
             out[v] = vertices[v] + step
             moved.append(v)
-    return BorderFit(*without_flattening(vertices, out, triangles, np.asarray(moved, np.int64)))
+    return without_flattening(vertices, out, triangles, np.asarray(moved, np.int64))
 
 
 def _step(v, neighbours, vertices, triangles, normal, facets, points, tree, cos_flat) -> np.ndarray | None:

@@ -31,7 +31,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from otjax.metrics3d import edge_sharpness
-from otjax.surfaces.fit_input import checked, unit_normals, vertex_facets, without_flattening
+from otjax.surfaces.fit_input import VertexFit, checked, unit_normals, vertex_facets, without_flattening
 
 #: Dihedral sharpness, in degrees, above which an edge is a crease
 #: (docs/decisions.md#feature_fit).
@@ -60,16 +60,8 @@ THICK = 3.0
 FLOOR = 0.01
 
 
-class CreaseFit(NamedTuple):
-    """What :func:`fit_creases` returns.
-
-    Attributes:
-      vertices: ``(V, 3)`` float64 the positions after the fit.
-      moved: ``(m,)`` int64 rows of ``vertices`` that moved, increasing.
-    """
-
-    vertices: np.ndarray
-    moved: np.ndarray
+#: What :func:`fit_creases` returns: the positions after the fit and the rows that moved.
+CreaseFit = VertexFit
 
 
 class _Planes(NamedTuple):
@@ -120,7 +112,7 @@ def fit_creases(vertices, triangles, points, sharp_angle: float = SHARP_ANGLE) -
     vertices, triangles, points = checked(vertices, triangles, points)
     out = vertices.copy()
     if not len(triangles) or not len(points):
-        return CreaseFit(out, np.zeros(0, np.int64))
+        return VertexFit(out, np.zeros(0, np.int64))
     sharp = edge_sharpness(vertices, triangles)
     creases = sharp.edges[(sharp.n_triangles > 1) & (sharp.angle > np.radians(sharp_angle))]
     count = np.bincount(creases.ravel(), minlength=len(vertices))
@@ -135,7 +127,7 @@ def fit_creases(vertices, triangles, points, sharp_angle: float = SHARP_ANGLE) -
         if target is not None:
             out[v] = target
             moved.append(v)
-    return CreaseFit(*without_flattening(vertices, out, triangles, np.asarray(moved, np.int64)))
+    return without_flattening(vertices, out, triangles, np.asarray(moved, np.int64))
 
 
 def _target(v, own, vertices, triangles, normal, points, tree, min_cos, sharp) -> np.ndarray | None:

@@ -4,6 +4,8 @@ against flattened triangles (:func:`without_flattening`)."""
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 
 from otjax.surfaces.relocation import MIN_ASPECT, aspect
@@ -48,9 +50,22 @@ def vertex_facets(triangles: np.ndarray) -> dict[int, list[int]]:
     return facets
 
 
+class VertexFit(NamedTuple):
+    """What a fit of a complex's vertices to the points returns
+    (:func:`~otjax.surfaces.crease_fit.fit_creases`, :func:`~otjax.surfaces.border_fit.fit_border`).
+
+    Attributes:
+      vertices: ``(V, 3)`` float64 the positions after the fit.
+      moved: ``(m,)`` int64 rows of ``vertices`` that moved, increasing.
+    """
+
+    vertices: np.ndarray
+    moved: np.ndarray
+
+
 def without_flattening(before: np.ndarray, after: np.ndarray, triangles: np.ndarray,
-                       moved: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """``(after, moved)`` with the fewest moves undone that flatten a triangle.
+                       moved: np.ndarray) -> VertexFit:
+    """``after`` and ``moved`` with the fewest moves undone that flatten a triangle.
 
     A triangle flatter than :data:`~otjax.surfaces.relocation.MIN_ASPECT`
     at the ``after`` positions and flatter than at ``before`` (``(V, 3)``
@@ -76,4 +91,4 @@ def without_flattening(before: np.ndarray, after: np.ndarray, triangles: np.ndar
         back = np.unique(back)
         after[back] = before[back]
         moved = np.setdiff1d(moved, back)
-    return after, moved
+    return VertexFit(after, moved)
