@@ -17,10 +17,13 @@ the other end of a crease) fall away from the fit. A third plane is
 kept only if it is about as thin as the other two: where a facet of the
 complex lies across a crease's end, its plane can only gather the points
 of other faces, and taken for a corner it would slide the vertex along
-the crease. Every decision is
-taken on the positions given; the vertices move together. All lengths
-are relative to the vertex's own edges, so scaling, rotating or
-translating the input moves the result with it.
+the crease. A crease vertex on the open border also slides along its
+crease to where the points along it end: the transport leaves a border
+vertex short of the last points, as :mod:`otjax.surfaces.border_fit`
+says of flat ones. Every decision is taken on the positions given; the
+vertices move together. All lengths are relative to the vertex's own
+edges, so scaling, rotating or translating the input moves the result
+with it.
 """
 
 from __future__ import annotations
@@ -58,6 +61,9 @@ ROUNDS = 4
 THICK = 3.0
 #: The least residual :data:`THICK` compares with, in units of ``r``.
 FLOOR = 0.01
+#: A crease's end slides along its line to the last point within this many
+#: times ``r`` of the line (docs/decisions.md#feature_fit).
+TUBE = 0.1
 
 
 #: What :func:`fit_creases` returns: the positions after the fit and the rows that moved.
@@ -80,17 +86,19 @@ def fit_creases(vertices, triangles, points, sharp_angle: float = SHARP_ANGLE) -
     two or more triangles: :func:`otjax.metrics3d.edge_sharpness`) is a
     crease vertex. Its facets are grouped by normal (within
     :data:`PLANE_ANGLE`, in increasing row order); with ``r`` the median
-    length of its edges, the points within ``r`` of it are shared among
-    the groups' planes and the planes refitted (module doc; planes that
-    come within :data:`PLANE_ANGLE` of one another merge, planes with
-    fewer than :data:`MIN_POINTS` points drop). With two planes more than
-    :data:`PLANE_ANGLE` apart the target is the nearest point of their
-    line; with three (pairwise so), their common point, unless one of
-    them is more than :data:`THICK` times as thick (root mean square
-    residual) as the thinnest: then it drops and the other two decide (if
-    two are, the vertex stays). The vertex moves
-    there if the move is at most ``r / 2`` and every plane has a point of
-    its own within :data:`GAP` ``* r`` of the target.
+    length of its edges, the points within ``r`` of it are shared among the
+    groups' planes and the planes refitted (module doc; planes that come
+    within :data:`PLANE_ANGLE` of one another merge, planes with fewer than
+    :data:`MIN_POINTS` points drop). With two planes more than
+    :data:`PLANE_ANGLE` apart the target is the nearest point of their line
+    (for a vertex on the open border, an edge of one triangle, slid along it
+    to where the points within :data:`TUBE` ``* r`` of it end, if the vertex
+    ends a crease edge along it: :func:`_crease_end`); with three (pairwise
+    so), their common point, unless one of them is more than :data:`THICK`
+    times as thick (root mean square residual) as the thinnest: then it
+    drops and the other two decide (if two are, the vertex stays). The
+    vertex moves there if the move is at most ``r / 2`` and every plane has
+    a point of its own within :data:`GAP` ``* r`` of the target.
     Moves that would flatten a triangle are undone
     (:func:`~otjax.surfaces.fit_input.without_flattening`).
 
@@ -116,6 +124,12 @@ def fit_creases(vertices, triangles, points, sharp_angle: float = SHARP_ANGLE) -
     sharp = edge_sharpness(vertices, triangles)
     creases = sharp.edges[(sharp.n_triangles > 1) & (sharp.angle > np.radians(sharp_angle))]
     count = np.bincount(creases.ravel(), minlength=len(vertices))
+    border = np.zeros(len(vertices), bool)
+    border[sharp.edges[sharp.n_triangles == 1].ravel()] = True
+    along = [[] for _ in range(len(vertices))]
+    for a, b in creases.tolist():
+        along[a].append(b)
+        along[b].append(a)
     normal = unit_normals(vertices, triangles)
     facets = vertex_facets(triangles)
     tree = cKDTree(points)
@@ -123,15 +137,19 @@ def fit_creases(vertices, triangles, points, sharp_angle: float = SHARP_ANGLE) -
     moved = []
     for v in np.flatnonzero(count >= 2).tolist():
         own = np.array([f for f in facets[v] if np.any(normal[f])], np.int64)
-        target = _target(v, own, vertices, triangles, normal, points, tree, min_cos, np.radians(sharp_angle))
+        target = _target(v, own, vertices, triangles, normal, points, tree, min_cos, np.radians(sharp_angle),
+                         np.array(along[v], np.int64) if border[v] else None)
         if target is not None:
             out[v] = target
             moved.append(v)
     return without_flattening(vertices, out, triangles, np.asarray(moved, np.int64))
 
 
-def _target(v, own, vertices, triangles, normal, points, tree, min_cos, sharp) -> np.ndarray | None:
-    """Where crease vertex ``v`` (facets ``own``) moves, or ``None`` if it stays."""
+def _target(v, own, vertices, triangles, normal, points, tree, min_cos, sharp,
+            end_of: np.ndarray | None) -> np.ndarray | None:
+    """Where crease vertex ``v`` (facets ``own``) moves, or ``None`` if it
+    stays; ``end_of``: where ``v`` is on the open border, its neighbours
+    along crease edges (:func:`_crease_end`), else ``None``."""
     ring = np.setdiff1d(triangles[own], [v])
     lengths = np.linalg.norm(vertices[ring] - vertices[v], axis=1)
     if not len(lengths) or not lengths.min() > 0:
@@ -148,11 +166,44 @@ def _target(v, own, vertices, triangles, normal, points, tree, min_cos, sharp) -
         target = vertices[v] - n.T @ np.linalg.solve(n @ n.T, n @ vertices[v] - c)
     else:
         target = np.linalg.solve(n, c)
+    if end_of is not None and len(n) == 2:
+        target = _crease_end(target, n, vertices[end_of], vertices[triangles[own]].mean(axis=(0, 1)), near, reach)
     if np.linalg.norm(target - vertices[v]) > reach / 2 or _gap(planes, near, target) > GAP * reach:
         return None
     if _least_sharpness(planes, near, target) <= sharp:
         return None
     return target
+
+
+def _crease_end(target, normals, neighbours, centre, near, reach) -> np.ndarray:
+    """``target``, on the line of the planes ``normals (2, 3)``, slid along
+    it away from ``centre`` (of the vertex's facets) to the last of the
+    points ``near`` within :data:`TUBE` ``* reach`` of the line: a border
+    vertex ending its crease goes where the crease of the points ends.
+    Only where its crease neighbours ``(k, 3)`` within :data:`GAP` ``*
+    reach`` of the line all lie behind it, and one does: the complex's
+    crease runs along this line and ends there. Unchanged too where the
+    tube holds fewer than :data:`MIN_POINTS` points or the slide exceeds
+    ``reach / 2``."""
+    line = np.cross(normals[0], normals[1])
+    line /= np.linalg.norm(line)
+    if (centre - target) @ line > 0:
+        line = -line
+
+    def split(x):  # (along the line, off it) for points x (k, 3)
+        d = x - target
+        a = d @ line
+        return a, np.linalg.norm(d - a[:, None] * line, axis=1)
+
+    a, off = split(neighbours)
+    on_line = off <= GAP * reach
+    if np.any((a > 0) & on_line) or not np.any((a < 0) & on_line):
+        return target
+    a, off = split(near)
+    tube = off <= TUBE * reach
+    if tube.sum() < MIN_POINTS or not abs(a[tube].max()) <= reach / 2:
+        return target
+    return target + float(a[tube].max()) * line
 
 
 def _facet_planes(own, vertices, triangles, normal) -> _Planes:

@@ -134,9 +134,9 @@ def reconstruct_surface(points, masses=None, n_vertices: int = 100, *, queue: st
       final_density_factor: the facets' bins before those passes, in multiples of ``bin_density``, the
         transport relaxed on them (the result's cost is on these; 1: the decimation's): a finer quadrature
         sharpens creases and corners (docs/decisions.md#final_density).
-      fit_features: where no background was found, then move crease vertices onto the points' planes
-        (:func:`~otjax.surfaces.fit_creases`), flat open-border ones out to the last points
-        (:func:`~otjax.surfaces.fit_border`), and relax the transport (docs/decisions.md#feature_fit).
+      fit_features: where no background was found, then move crease vertices onto the points' planes (and
+        crease ends at the open border along them: :func:`~otjax.surfaces.fit_creases`), flat open-border
+        ones out to the last points (:func:`~otjax.surfaces.fit_border`), and relax the transport.
       progress: show a progress bar.
 
     Returns:
@@ -262,7 +262,8 @@ def _shape_part(points: np.ndarray, masses: np.ndarray | None, background: str) 
 def _fit_features(plan: SurfacePlan, points: np.ndarray, fit: bool, method: str) -> int:
     """With ``fit``, moves the complex's crease vertices and then its flat
     open-border vertices to the canonical ``points``, then relaxes the
-    transport on the moved complex; the number of vertices moved."""
+    transport on the moved complex; the number of vertices moved
+    (docs/decisions.md#feature_fit)."""
     if not fit:
         return 0
     arrays = plan.complex.to_arrays()

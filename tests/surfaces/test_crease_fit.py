@@ -7,7 +7,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
 
-from otjax.surfaces.crease_fit import fit_creases
+from otjax.surfaces.crease_fit import _crease_end, fit_creases
 
 
 def folded_sheets(rows: int, opening: float, width: float):
@@ -185,6 +185,32 @@ def test_a_facet_across_a_crease_end_makes_no_corner_of_other_faces():
 
     assert end in fit.moved.tolist()
     assert np.allclose(fit.vertices[end], [0, 0, 0.005], atol=1e-3)
+
+
+@pytest.mark.parametrize("neighbours, slides", [
+    ([[0, 0, 0.3]], True),  # the crease goes on behind the vertex only: an end
+    ([[0, 0, 0.3], [0, 0, 0.05]], False),  # and on beyond it, on the line: no end (two vertices on one end)
+    ([[0, 0, 0.3], [0.15, 0.15, 0.05]], True),  # beyond it but off the line (across the border): an end
+    ([[0.15, 0.15, 0.3]], False),  # no crease edge of the vertex along the line: not its crease
+])
+def test_only_the_last_vertex_of_a_crease_slides_to_its_end(neighbours, slides):
+    # Two right-angled sheets meet at the z axis; their points end at z = 0. The border vertex at
+    # z = 0.1, its facets above it, slides down the axis to the last point there if a crease edge
+    # of it runs up the axis and none goes on below it.
+    rng = np.random.default_rng(9)
+    a, b = rng.random((2, 4000))
+    points = np.concatenate([np.c_[a * 0.5, np.zeros(4000), b], np.c_[np.zeros(4000), a * 0.5, b]])
+    target = np.array([0.0, 0.0, 0.1])
+
+    out = _crease_end(target, np.eye(3)[:2], np.array(neighbours, float), np.array([0.1, 0.1, 0.4]),
+                      points[np.linalg.norm(points - target, axis=1) <= 0.3], 0.3)
+
+    if slides:
+        tube = points[(np.linalg.norm(points[:, :2], axis=1) <= 0.03) & (points[:, 2] < 0.1)]
+        assert np.allclose(out, [0, 0, tube[:, 2].min()], atol=1e-12)
+        assert out[2] < 0.01
+    else:
+        assert np.array_equal(out, target)
 
 
 def test_nothing_moves_without_triangles_or_points():
