@@ -201,9 +201,10 @@ def _crease_end(target, normals, neighbours, centre, near, reach) -> np.ndarray:
         return target
     a, off = split(near)
     tube = off <= TUBE * reach
-    if tube.sum() < MIN_POINTS or not abs(a[tube].max()) <= reach / 2:
+    if tube.sum() < MIN_POINTS:
         return target
-    return target + float(a[tube].max()) * line
+    step = float(a[tube].max())
+    return target + step * line if abs(step) <= reach / 2 else target
 
 
 def _facet_planes(own, vertices, triangles, normal) -> _Planes:
