@@ -190,12 +190,16 @@ def to_canonical(points, masses) -> tuple[Frame, np.ndarray, np.ndarray]:
     """
     points = np.asarray(points, np.float64)
     frame = canonical_frame(points, masses)
-    q = frame.points_in(points)
-    # Rows mapped exactly cannot collide: p/s did not underflow (it scales back to p) and
-    # (q + c/s) recovers p/s. Only if some row was rounded is the (sorting) duplicate
-    # check worth its time.
-    scaled = np.ldexp(points, -frame.scale_exp)
-    shift = np.ldexp(frame.centre, -frame.scale_exp)
+    with np.errstate(over="ignore", invalid="ignore"):  # a box far thinner than its distance from 0
+        q = frame.points_in(points)
+        # Rows mapped exactly cannot collide: p/s did not underflow (it scales back to p) and
+        # (q + c/s) recovers p/s. Only if some row was rounded is the (sorting) duplicate
+        # check worth its time.
+        scaled = np.ldexp(points, -frame.scale_exp)
+        shift = np.ldexp(frame.centre, -frame.scale_exp)
+    if not np.all(np.isfinite(q)):
+        raise ValueError("the points' bounding box is too small for its distance from the origin: float64 "
+                         "cannot hold them in units of the box; move them nearer the origin")
     if np.any(np.ldexp(scaled, frame.scale_exp) != points) or np.any(q + shift != scaled):
         _, first, inverse = np.unique(q + 0.0, axis=0, return_index=True, return_inverse=True)
         if len(first) < len(q):

@@ -108,6 +108,9 @@ def test_extreme_but_valid_inputs_are_accepted():
         ([[1e12, 0], [1e12, 1e-18], [1e12 + 1, 0], [1e12, 1]], None, ["points 0 and 1", "closer than float64"]),
         # Collapsed by the scaling itself (the third point's y underflows), not by the translation.
         ([[0, 0], [0, 6.90174635e69], [0, 2.71128045e-254]], None, ["points 0 and 2", "closer than float64"]),
+        # A box 2e-300 wide at 5e8 from the origin: its units overflow the far coordinate.
+        ([[0, 5.36870912e8], [1e-300, 5.36870912e8], [-1e-300, 5.36870912e8]], None,
+         ["too small for its distance from the origin"]),
     ],
 )
 def test_input_float64_cannot_hold_after_normalising_is_refused(points, masses, words):
