@@ -11,6 +11,10 @@ import numpy as np
 from otjax.surfaces.relocation import MIN_ASPECT, aspect
 from otjax.surfaces.star_plan import face_normals
 
+#: An edge a fit shortens to less than this fraction of its length closes:
+#: one of the moves is undone (docs/decisions.md#feature_fit).
+CLOSED = 0.1
+
 
 def checked(vertices, triangles, points) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``(vertices (V, 3) float64, triangles (T, 3) int64, points (n, 3) float64)``.
@@ -65,29 +69,34 @@ class VertexFit(NamedTuple):
 
 def without_flattening(before: np.ndarray, after: np.ndarray, triangles: np.ndarray,
                        moved: np.ndarray) -> VertexFit:
-    """``after`` and ``moved`` with the fewest moves undone that flatten a triangle.
+    """``after`` and ``moved`` with the fewest moves undone that flatten a
+    triangle or close one of its edges.
 
     A triangle flatter than :data:`~otjax.surfaces.relocation.MIN_ASPECT`
     at the ``after`` positions and flatter than at ``before`` (``(V, 3)``
     each) puts back the one of its ``moved`` vertices that moved least
     (several vertices of one triangle can each move well and flatten it
-    together, as three on one crease line would); repeated until none does.
+    together, as three on one crease line would); an edge shortened to less
+    than :data:`CLOSED` times its length puts back the one of its moved ends
+    that moved least (two vertices sent to one crease end would make it
+    twice). Repeated until none does.
     """
     after, moved = after.copy(), np.asarray(moved, np.int64)
     old = aspect(before[triangles])
+    edges = np.unique(np.sort(triangles[:, [[0, 1], [1, 2], [0, 2]]].reshape(-1, 2), axis=1), axis=0)
+    old_length = np.linalg.norm(np.diff(before[edges], axis=1)[:, 0], axis=1)
     step = np.linalg.norm(after - before, axis=1)
     while len(moved):
         new = aspect(after[triangles])
-        flat = triangles[(new < MIN_ASPECT) & (new < old)]
-        if not len(flat):
-            break
-        rows = flat[np.isin(flat, moved).any(axis=1)]
-        if not len(rows):
-            break
+        closed = np.linalg.norm(np.diff(after[edges], axis=1)[:, 0], axis=1) < CLOSED * old_length
+        groups = [row for row in triangles[(new < MIN_ASPECT) & (new < old)]] + list(edges[closed])
         back = []
-        for row in rows:
+        for row in groups:
             mine = row[np.isin(row, moved)]
-            back.append(mine[np.argmin(step[mine])])
+            if len(mine):
+                back.append(mine[np.argmin(step[mine])])
+        if not back:
+            break
         back = np.unique(back)
         after[back] = before[back]
         moved = np.setdiff1d(moved, back)

@@ -32,7 +32,7 @@ from otjax.surfaces.plan import BinSettings, Entries, SurfacePlan
 from otjax.surfaces.relaxation import relax
 from otjax.surfaces.result import SurfaceResult
 from otjax.surfaces.solvers import LocalSolver, default_solver
-from otjax.surfaces.t_junctions import close_t_junctions
+from otjax.surfaces.t_junctions import close_t_junctions, split_slivers
 from otjax.validation import check_number, check_points, check_target
 
 SOLVERS = ("batched", "exact")
@@ -135,8 +135,8 @@ def reconstruct_surface(points, masses=None, n_vertices: int = 100, *, queue: st
         transport relaxed on them (the result's cost is on these; 1: the decimation's): a finer quadrature
         sharpens creases and corners (docs/decisions.md#final_density).
       fit_features: where no background was found, then move crease vertices onto the points' planes (and
-        crease ends at the open border along them: :func:`~otjax.surfaces.fit_creases`), flat open-border
-        ones out to the last points (:func:`~otjax.surfaces.fit_border`), and relax the transport.
+        crease ends at the open border along them: :func:`~otjax.surfaces.fit_creases`), flat open-border ones
+        out to the last points (:func:`~otjax.surfaces.fit_border`), drop facets left on a line, and relax.
       progress: show a progress bar.
 
     Returns:
@@ -261,9 +261,10 @@ def _shape_part(points: np.ndarray, masses: np.ndarray | None, background: str) 
 
 def _fit_features(plan: SurfacePlan, points: np.ndarray, fit: bool, method: str) -> int:
     """With ``fit``, moves the complex's crease vertices and then its flat
-    open-border vertices to the canonical ``points``, then relaxes the
-    transport on the moved complex; the number of vertices moved
-    (docs/decisions.md#feature_fit)."""
+    open-border vertices to the canonical ``points``, removes the facets the
+    moves left lying on a line (:func:`~otjax.surfaces.t_junctions.split_slivers`),
+    then relaxes the transport on the moved complex; the number of vertices
+    moved (docs/decisions.md#feature_fit)."""
     if not fit:
         return 0
     arrays = plan.complex.to_arrays()
@@ -273,6 +274,7 @@ def _fit_features(plan: SurfacePlan, points: np.ndarray, fit: bool, method: str)
     for row in moved.tolist():
         plan.complex.move(int(arrays.vertex_ids[row]), fitted[row])
     if len(moved):
+        split_slivers(plan)
         relax(plan, LocalSolver(method), max_sweeps=REBIN_SWEEPS)
     return len(moved)
 

@@ -1,4 +1,4 @@
-"""T-junctions left by the decimation, and closing them.
+"""T-junctions left by the decimation, and closing them; slivers, and removing them.
 
 Half-edge collapses on a non-manifold complex can leave two sheets that
 meet along a line without sharing its edges: one ends on an edge ``(a, b)``,
@@ -10,6 +10,10 @@ splits every facet ``(a, b, c)`` of that edge at ``v`` into ``(a, v, c)`` and
 where ``v`` is on the segment, the surface is the same and the sheets share
 the edges ``(a, v)`` and ``(v, b)``. A split that would make a sliver is
 not made (:func:`is_t_junction`; docs/decisions.md#t_junctions).
+
+A facet whose three corners lie on one line, as a fit that moves
+vertices onto a crease can leave, is removed the same way: its long edge
+is split at its middle corner (:func:`split_slivers`).
 
 The transport plan follows: a split facet's mass goes to the half its bin
 lies in, spread over that half's bins by capacity, which keeps the plan
@@ -104,6 +108,42 @@ def close_t_junctions(plan: SurfacePlan, angle: float = T_JUNCTION_ANGLE) -> int
                 _split(plan, j)
                 splits += 1
     return splits
+
+
+def split_slivers(plan: SurfacePlan, angle: float = T_JUNCTION_ANGLE) -> int:
+    """Removes the slivers of ``plan.complex`` in place: a facet with a
+    corner ``v`` that sees the opposite edge ``(a, b)`` under at least ``180
+    - angle`` degrees (its widest) lies on that edge, as when a fit has put
+    its three corners on one crease line. Splitting ``(a, b)`` at ``v``
+    drops it and splits every other facet of that edge in two, as a
+    T-junction is closed; the plan's entries follow (module doc). In rounds
+    (a split can leave a new sliver, where a facet's third corner is on the
+    line too) until none is left or after :data:`MAX_ROUNDS`; returns how
+    many edges were split."""
+    splits = 0
+    for _ in range(MAX_ROUNDS):
+        todo = _slivers(plan.complex, angle)
+        if not todo:
+            break
+        for j in todo:
+            c = plan.complex
+            if c.has_edge(j.a, j.b) and c.has_edge(j.a, j.v) and c.has_edge(j.v, j.b) \
+                    and _flat(c.positions, j.a, j.v, j.b, angle):  # an earlier split may have removed it
+                _split(plan, j)
+                splits += 1
+    return splits
+
+
+def _slivers(complex_: SimplicialComplex, angle: float) -> list[TJunction]:
+    """One :class:`TJunction` ``(a, b, v)`` per facet flat at its widest corner ``v``, in facet order."""
+    x = complex_.positions
+    found = []
+    for t in sorted(complex_.triangles):
+        k = min(range(3), key=lambda i: _cosine(x, t[i - 1], t[i], t[(i + 1) % 3]))  # the widest corner
+        j = TJunction(t[k - 1], t[(k + 1) % 3], t[k])
+        if _flat(x, j.a, j.v, j.b, angle):
+            found.append(j)
+    return found
 
 
 def _split(plan: SurfacePlan, j: TJunction) -> None:

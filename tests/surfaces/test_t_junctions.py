@@ -1,4 +1,5 @@
-"""Edge splits and T-junction closing: simplex-set oracle, a cracked cube edge, the plan kept feasible."""
+"""Edge splits, T-junction closing and sliver removal: simplex-set oracle,
+a cracked cube edge, the plan kept feasible."""
 
 from itertools import combinations
 
@@ -10,7 +11,7 @@ from hypothesis import strategies as st
 from otjax.metrics3d import crease_error, edge_sharpness
 from otjax.surfaces.complex import SimplicialComplex
 from otjax.surfaces.plan import BinSettings, Entries, SurfacePlan
-from otjax.surfaces.t_junctions import TJunction, close_t_junctions, find_t_junctions
+from otjax.surfaces.t_junctions import TJunction, close_t_junctions, find_t_junctions, split_slivers
 from tests.surfaces.complexes import delaunay_complex, simplex_sets
 
 
@@ -177,3 +178,56 @@ def test_the_sliver_on_a_split_edge_hands_its_mass_to_its_corners():
     assert (0, 1, 2) not in plan.complex.triangles and not plan.complex.has_edge(0, 1)
     assert sum(plan.simplex_mass(v) for v in (0, 1, 2)) == pytest.approx(corners + sliver, rel=1e-12)
     check_feasible(plan)
+
+
+def widest_cosine(x: np.ndarray, t) -> float:
+    """The cosine of a triangle's widest corner angle, from its side vectors (an independent oracle)."""
+    cos = []
+    for k in range(3):
+        u, w = x[t[k - 1]] - x[t[k]], x[t[(k + 1) % 3]] - x[t[k]]
+        n = np.linalg.norm(u) * np.linalg.norm(w)
+        cos.append(u @ w / n if n > 0 else -1.0)
+    return min(cos)
+
+
+@settings(max_examples=100, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(st.integers(0, 2**31 - 1), st.integers(5, 14), st.floats(0.3, 1.0), st.floats(0.05, 0.95),
+       st.integers(1, 3))
+def test_splitting_slivers_keeps_the_plan_feasible_and_leaves_no_facet_on_a_line(seed, n, keep, at, flat):
+    c = delaunay_complex(seed, n, keep)
+    tris = c.triangle_array()
+    assume(len(tris) >= 1)
+    rng = np.random.default_rng([seed, 2])
+    for t in tris[rng.choice(len(tris), size=min(flat, len(tris)), replace=False)]:
+        a, b, v = rng.permutation(t)
+        c.positions[v] = c.positions[a] + at * (c.positions[b] - c.positions[a])  # v onto the segment ab
+    plan = random_plan(c, rng)
+    lines = sum(widest_cosine(c.positions, t) <= -np.cos(np.radians(5.0)) for t in c.triangles)
+    splits = split_slivers(plan)
+    assert splits >= min(1, lines)
+    x = plan.complex.positions
+    assert all(widest_cosine(x, t) > -np.cos(np.radians(5.0)) for t in plan.complex.triangles)
+    assert split_slivers(plan) == 0
+    check_feasible(plan)
+
+
+def test_three_corners_on_one_crease_line_lose_their_facet_and_its_long_edge():
+    c = cracked_cube_edge()
+    c = SimplicialComplex(c.positions, np.vstack([c.triangle_array(), [[0, 1, 2]]]))  # v on ab: flat
+    plan = random_plan(c, np.random.default_rng(5))
+    total = plan.masses.sum()
+    assert split_slivers(plan) == 1
+    assert (0, 1, 2) not in plan.complex.triangles and not plan.complex.has_edge(0, 1)
+    # the top face now ends on the two halves, as the side face does: one crease
+    sharp = edge_sharpness(plan.complex.positions, plan.complex.triangle_array())
+    on_line = [i for i, e in enumerate(sharp.edges.tolist()) if sorted(e) in ([0, 2], [1, 2])]
+    np.testing.assert_allclose(sharp.angle[on_line], np.pi / 2, atol=1e-12)
+    assert plan.point_mass().sum() == pytest.approx(total, rel=1e-12)
+    check_feasible(plan)
+
+
+def test_a_thin_facet_off_the_line_stays():
+    c = cracked_cube_edge(offset=0.05)  # v at 168.6 degrees from ab
+    c = SimplicialComplex(c.positions, np.vstack([c.triangle_array(), [[0, 1, 2]]]))
+    plan = random_plan(c, np.random.default_rng(6))
+    assert split_slivers(plan) == 0 and (0, 1, 2) in plan.complex.triangles
