@@ -18,8 +18,9 @@ kept only if it is about as thin as the other two: where a facet of the
 complex lies across a crease's end, its plane can only gather the points
 of other faces, and taken for a corner it would slide the vertex along
 the crease. A crease vertex on the open border also slides along its
-crease to where the points along it end: the transport leaves a border
-vertex short of the last points, as :mod:`otjax.surfaces.border_fit`
+crease to where the points along it end (a vertex on one sharp edge
+only between thin planes): the transport leaves a border vertex short of
+the last points, as :mod:`otjax.surfaces.border_fit`
 says of flat ones. Every decision is taken on the positions given; the
 vertices move together. All lengths are relative to the vertex's own
 edges, so scaling, rotating or translating the input moves the result
@@ -34,7 +35,8 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from otjax.metrics3d import edge_sharpness
-from otjax.surfaces.fit_input import VertexFit, checked, unit_normals, vertex_facets, without_flattening
+from otjax.surfaces.fit_input import (VertexFit, checked, uniform_end, unit_normals, vertex_facets,
+                                      without_flattening)
 
 #: Dihedral sharpness, in degrees, above which an edge is a crease
 #: (docs/decisions.md#feature_fit).
@@ -61,9 +63,13 @@ ROUNDS = 4
 THICK = 3.0
 #: The least residual :data:`THICK` compares with, in units of ``r``.
 FLOOR = 0.01
-#: A crease's end slides along its line to the last point within this many
-#: times ``r`` of the line (docs/decisions.md#feature_fit).
+#: A crease's end slides along its line to where the points within this
+#: many times ``r`` of the line end (docs/decisions.md#feature_fit).
 TUBE = 0.1
+#: A border vertex on one sharp edge moves only where the root mean square
+#: residual of each of its two fitted planes is at most this many times ``r``
+#: (docs/decisions.md#feature_fit).
+THIN = 0.03
 
 
 #: What :func:`fit_creases` returns: the positions after the fit and the rows that moved.
@@ -84,7 +90,9 @@ def fit_creases(vertices, triangles, points, sharp_angle: float = SHARP_ANGLE) -
 
     A vertex on at least two edges sharper than ``sharp_angle`` (edges of
     two or more triangles: :func:`otjax.metrics3d.edge_sharpness`) is a
-    crease vertex. Its facets are grouped by normal (within
+    crease vertex, and so is a vertex of the open border on one (where a
+    crease ends), if its two fitted planes are thin (root mean square
+    residual at most :data:`THIN` ``* r``). Its facets are grouped by normal (within
     :data:`PLANE_ANGLE`, in increasing row order); with ``r`` the median
     length of its edges, the points within ``r`` of it are shared among the
     groups' planes and the planes refitted (module doc; planes that come
@@ -135,7 +143,7 @@ def fit_creases(vertices, triangles, points, sharp_angle: float = SHARP_ANGLE) -
     tree = cKDTree(points)
     min_cos = np.cos(np.radians(PLANE_ANGLE))
     moved = []
-    for v in np.flatnonzero(count >= 2).tolist():
+    for v in np.flatnonzero((count >= 2) | ((count == 1) & border)).tolist():
         own = np.array([f for f in facets[v] if np.any(normal[f])], np.int64)
         target = _target(v, own, vertices, triangles, normal, points, tree, min_cos, np.radians(sharp_angle),
                          np.array(along[v], np.int64) if border[v] else None)
@@ -159,8 +167,12 @@ def _target(v, own, vertices, triangles, normal, points, tree, min_cos, sharp,
     planes = _fitted(_facet_planes(own, vertices, triangles, normal), near, reach)
     if planes is None or len(planes.normal) not in (2, 3):
         return None
-    n, c, _ = planes
+    n, c, tolerance = planes
     if np.any(np.abs(n @ n.T)[np.triu_indices(len(n), 1)] > min_cos):
+        return None
+    # One sharp edge is weaker evidence of a crease than two: on coarse
+    # complexes a plane fitted across two faces tilts and moves the end far.
+    if end_of is not None and len(end_of) == 1 and np.any(tolerance / TRIM > THIN * reach):
         return None
     if len(n) == 2:  # the nearest point of the line n x = c
         target = vertices[v] - n.T @ np.linalg.solve(n @ n.T, n @ vertices[v] - c)
@@ -177,9 +189,9 @@ def _target(v, own, vertices, triangles, normal, points, tree, min_cos, sharp,
 
 def _crease_end(target, normals, neighbours, centre, near, reach) -> np.ndarray:
     """``target``, on the line of the planes ``normals (2, 3)``, slid along
-    it away from ``centre`` (of the vertex's facets) to the last of the
-    points ``near`` within :data:`TUBE` ``* reach`` of the line: a border
-    vertex ending its crease goes where the crease of the points ends.
+    it away from ``centre`` (of the vertex's facets) to where the points
+    ``near`` within :data:`TUBE` ``* reach`` of the line end (:func:`~otjax.surfaces.fit_input.uniform_end`):
+    a border vertex ending its crease goes where the crease of the points ends.
     Only where its crease neighbours ``(k, 3)`` within :data:`GAP` ``*
     reach`` of the line all lie behind it, and one does: the complex's
     crease runs along this line and ends there. Unchanged too where the
@@ -203,8 +215,9 @@ def _crease_end(target, normals, neighbours, centre, near, reach) -> np.ndarray:
     tube = off <= TUBE * reach
     if tube.sum() < MIN_POINTS:
         return target
-    step = float(a[tube].max())
+    step = uniform_end(a[tube])
     return target + step * line if abs(step) <= reach / 2 else target
+
 
 
 def _facet_planes(own, vertices, triangles, normal) -> _Planes:

@@ -1,6 +1,7 @@
 """What the fitting steps of a finished complex share: their checked input
-(:func:`checked`), unit facet normals, each vertex's facets and the guard
-against flattened triangles (:func:`without_flattening`)."""
+(:func:`checked`), unit facet normals, each vertex's facets, where a
+uniform sample ends (:func:`uniform_end`) and the guard against flattened
+triangles (:func:`without_flattening`)."""
 
 from __future__ import annotations
 
@@ -52,6 +53,14 @@ def vertex_facets(triangles: np.ndarray) -> dict[int, list[int]]:
         for v in row:
             facets.setdefault(v, []).append(f)
     return facets
+
+
+def uniform_end(x: np.ndarray) -> float:
+    """Where samples ``x (k,)``, ``k >= 2``, of a uniform spread end: past
+    the largest by their mean spacing, since the last of ``k`` uniform
+    samples of an interval falls short of its end by ``1 / (k + 1)`` of it
+    on average."""
+    return float(x.max() + np.ptp(x) / (len(x) - 1))
 
 
 class VertexFit(NamedTuple):

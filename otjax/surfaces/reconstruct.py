@@ -136,7 +136,7 @@ def reconstruct_surface(points, masses=None, n_vertices: int = 100, *, queue: st
         sharpens creases and corners (docs/decisions.md#final_density).
       fit_features: where no background was found, then move crease vertices onto the points' planes (and
         crease ends at the open border along them: :func:`~otjax.surfaces.fit_creases`), flat open-border ones
-        out to the last points (:func:`~otjax.surfaces.fit_border`), drop facets left on a line, and relax.
+        out to where the points end (:func:`~otjax.surfaces.fit_border`), drop facets left on a line, relax.
       progress: show a progress bar.
 
     Returns:

@@ -116,22 +116,37 @@ def split_slivers(plan: SurfacePlan, angle: float = T_JUNCTION_ANGLE) -> int:
     - angle`` degrees (its widest) lies on that edge, as when a fit has put
     its three corners on one crease line. Splitting ``(a, b)`` at ``v``
     drops it and splits every other facet of that edge in two, as a
-    T-junction is closed; the plan's entries follow (module doc). In rounds
-    (a split can leave a new sliver, where a facet's third corner is on the
-    line too) until none is left or after :data:`MAX_ROUNDS`; returns how
-    many edges were split."""
-    splits = 0
-    for _ in range(MAX_ROUNDS):
-        todo = _slivers(plan.complex, angle)
-        if not todo:
-            break
-        for j in todo:
-            c = plan.complex
-            if c.has_edge(j.a, j.b) and c.has_edge(j.a, j.v) and c.has_edge(j.v, j.b) \
-                    and _flat(c.positions, j.a, j.v, j.b, angle):  # an earlier split may have removed it
+    T-junction is closed; the plan's entries follow (module doc). A sliver
+    stays where a half would be a sliver again (another facet of ``(a, b)``
+    has its third corner on that line too: four corners on one line, which
+    splitting would only shuffle). Returns how many edges were split."""
+    splits = -1
+    total = 0
+    while splits:  # each split removes a sliver and makes none, so this ends
+        splits = 0
+        for j in _slivers(plan.complex, angle):
+            if _splittable(plan.complex, j, angle):  # an earlier split may have removed it
                 _split(plan, j)
                 splits += 1
-    return splits
+        total += splits
+    return total
+
+
+def _splittable(complex_: SimplicialComplex, j: TJunction, angle: float) -> bool:
+    """Whether ``(a, v, b)`` is still a sliver of ``complex_`` whose split at
+    ``v`` leaves no half flat at a corner."""
+    c = complex_
+    if not (c.has_edge(j.a, j.b) and c.has_edge(j.a, j.v) and c.has_edge(j.v, j.b)
+            and _flat(c.positions, j.a, j.v, j.b, angle)):
+        return False
+    for t in c.edge_triangles(j.a, j.b):
+        if j.v in t:
+            continue
+        (o,) = set(t) - {j.a, j.b}
+        for half in ((j.a, j.v, o), (j.v, j.b, o)):
+            if any(_flat(c.positions, half[k - 1], half[k], half[(k + 1) % 3], angle) for k in range(3)):
+                return False
+    return True
 
 
 def _slivers(complex_: SimplicialComplex, angle: float) -> list[TJunction]:
