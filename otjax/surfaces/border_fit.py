@@ -85,8 +85,8 @@ def fit_border(vertices, triangles, points, flat_angle: float = FLAT_ANGLE) -> B
       >>> fit = fit_border(v, t, pts)
       >>> fit.moved.tolist()
       [0, 1, 2, 3, 5, 6, 7, 8]
-      >>> moved = fit.vertices[[0, 1, 4]] - [[0, 0, 0], [0.5, 0, 0], [0.5, 0.5, 0]]  # a corner, a side, the centre
-      >>> bool(np.abs(moved).max() < 0.025 / 10)  # at the grid's sides, to a tenth of its step
+      >>> off = fit.vertices[[0, 1, 4]] - [[0, 0, 0], [0.5, 0, 0], [0.5, 0.5, 0]]  # corner, side, centre
+      >>> bool(np.abs(off).max() < 0.025 / 10)  # at the grid's sides, to a tenth of its step
       True
     """
     vertices, triangles, points = _checked(vertices, triangles, points, flat_angle)

@@ -92,12 +92,12 @@ def fit_creases(vertices, triangles, points, sharp_angle: float = SHARP_ANGLE) -
     two or more triangles: :func:`otjax.metrics3d.edge_sharpness`) is a
     crease vertex, and so is a vertex of the open border on one (where a
     crease ends), if its two fitted planes are thin (root mean square
-    residual at most :data:`THIN` ``* r``). Its facets are grouped by normal (within
-    :data:`PLANE_ANGLE`, in increasing row order); with ``r`` the median
-    length of its edges, the points within ``r`` of it are shared among the
-    groups' planes and the planes refitted (module doc; planes that come
-    within :data:`PLANE_ANGLE` of one another merge, planes with fewer than
-    :data:`MIN_POINTS` points drop). With two planes more than
+    residual at most :data:`THIN` ``* r``). Its facets are grouped by
+    normal (within :data:`PLANE_ANGLE`, in increasing row order); with
+    ``r`` the median length of its edges, the points within ``r`` of it are
+    shared among the groups' planes and the planes refitted (module doc;
+    planes that come within :data:`PLANE_ANGLE` of one another merge,
+    planes with fewer than :data:`MIN_POINTS` points drop). With two planes more than
     :data:`PLANE_ANGLE` apart the target is the nearest point of their line
     (for a vertex on the open border, an edge of one triangle, slid along it
     to where the points within :data:`TUBE` ``* r`` of it end, if the vertex
@@ -190,8 +190,9 @@ def _target(v, own, vertices, triangles, normal, points, tree, min_cos, sharp,
 def _crease_end(target, normals, neighbours, centre, near, reach) -> np.ndarray:
     """``target``, on the line of the planes ``normals (2, 3)``, slid along
     it away from ``centre`` (of the vertex's facets) to where the points
-    ``near`` within :data:`TUBE` ``* reach`` of the line end (:func:`~otjax.surfaces.fit_input.uniform_end`):
-    a border vertex ending its crease goes where the crease of the points ends.
+    ``near`` within :data:`TUBE` ``* reach`` of the line end
+    (:func:`~otjax.surfaces.fit_input.uniform_end`): a border vertex
+    ending its crease goes where the crease of the points ends.
     Only where its crease neighbours ``(k, 3)`` within :data:`GAP` ``*
     reach`` of the line all lie behind it, and one does: the complex's
     crease runs along this line and ends there. Unchanged too where the
@@ -217,7 +218,6 @@ def _crease_end(target, normals, neighbours, centre, near, reach) -> np.ndarray:
         return target
     step = uniform_end(a[tube])
     return target + step * line if abs(step) <= reach / 2 else target
-
 
 
 def _facet_planes(own, vertices, triangles, normal) -> _Planes:

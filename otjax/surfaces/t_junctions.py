@@ -73,12 +73,18 @@ def is_t_junction(complex_: SimplicialComplex, j: TJunction, angle: float = T_JU
     facets = [t for t in c.edge_triangles(j.a, j.b) if j.v not in t]
     if not facets or not _flat(c.positions, j.a, j.v, j.b, angle):
         return False
+    return not _halves_flat(c.positions, j, facets, angle)
+
+
+def _halves_flat(x: np.ndarray, j: TJunction, facets, angle: float) -> bool:
+    """Whether splitting one of ``facets`` (on the edge ``(a, b)``, without
+    ``v``) at ``v`` makes a half flat at one of its corners."""
     for t in facets:
         (o,) = set(t) - {j.a, j.b}
         for half in ((j.a, j.v, o), (j.v, j.b, o)):
-            if any(_flat(c.positions, half[k - 1], half[k], half[(k + 1) % 3], angle) for k in range(3)):
-                return False
-    return True
+            if any(_flat(x, half[k - 1], half[k], half[(k + 1) % 3], angle) for k in range(3)):
+                return True
+    return False
 
 
 def _cosine(x: np.ndarray, a: int, v: int, b: int) -> float:
@@ -139,14 +145,7 @@ def _splittable(complex_: SimplicialComplex, j: TJunction, angle: float) -> bool
     if not (c.has_edge(j.a, j.b) and c.has_edge(j.a, j.v) and c.has_edge(j.v, j.b)
             and _flat(c.positions, j.a, j.v, j.b, angle)):
         return False
-    for t in c.edge_triangles(j.a, j.b):
-        if j.v in t:
-            continue
-        (o,) = set(t) - {j.a, j.b}
-        for half in ((j.a, j.v, o), (j.v, j.b, o)):
-            if any(_flat(c.positions, half[k - 1], half[k], half[(k + 1) % 3], angle) for k in range(3)):
-                return False
-    return True
+    return not _halves_flat(c.positions, j, [t for t in c.edge_triangles(j.a, j.b) if j.v not in t], angle)
 
 
 def _slivers(complex_: SimplicialComplex, angle: float) -> list[TJunction]:
