@@ -126,16 +126,16 @@ def split_slivers(plan: SurfacePlan, angle: float = T_JUNCTION_ANGLE) -> int:
     stays where a half would be a sliver again (another facet of ``(a, b)``
     has its third corner on that line too: four corners on one line, which
     splitting would only shuffle). Returns how many edges were split."""
-    splits = -1
     total = 0
-    while splits:  # each split removes a sliver and makes none, so this ends
+    while True:  # each split removes a sliver and makes none, so this ends
         splits = 0
         for j in _slivers(plan.complex, angle):
             if _splittable(plan.complex, j, angle):  # an earlier split may have removed it
                 _split(plan, j)
                 splits += 1
+        if not splits:
+            return total
         total += splits
-    return total
 
 
 def _splittable(complex_: SimplicialComplex, j: TJunction, angle: float) -> bool:
