@@ -32,7 +32,6 @@ from otjax.validation import check_number, check_points, check_target
 
 BACKGROUNDS = ("auto", "none")
 # The size rules of the defaults (docs/decisions.md#default_initial_vertices, #default_queue).
-INITIAL_ALL = 4000
 INITIAL_FLOOR = 2000
 INITIAL_PER_VERTEX = 20
 EXHAUSTIVE_COLLAPSES = 4000
@@ -299,14 +298,12 @@ def _history(run: _Outcome, noise: Background | None) -> dict:
 def default_initial_vertices(n_points: int, n_vertices: int | None) -> int:
     """Initial vertex count used when ``initial_vertices`` is not given.
 
-    Every point up to 4000 points; above, a random subset of 2000 points or
-    20 per target vertex, whichever is more: the end of a run, where
-    stencils hold thousands of points, dominates its time, and a larger
-    subset mostly adds collapses (docs/decisions.md#default_initial_vertices).
-    Tolerance mode (no target) uses the floor of 2000.
+    Every point up to 2000 points; above, a random subset of 2000 points or
+    20 per target vertex, whichever is more. A larger subset mostly adds
+    collapses, and on noisy inputs it also ends less accurate
+    (docs/decisions.md#default_initial_vertices). Tolerance mode (no
+    target) uses 2000.
     """
-    if n_points <= INITIAL_ALL:
-        return n_points
     return min(n_points, max(INITIAL_FLOOR, INITIAL_PER_VERTEX * (n_vertices or 0)))
 
 

@@ -8,7 +8,7 @@ import otjax
 from otjax import datasets, metrics
 from otjax.background import estimate_background
 from otjax.curves import filtering
-from otjax.curves.reconstruct import default_queue, EXHAUSTIVE_COLLAPSES
+from otjax.curves.reconstruct import default_initial_vertices, default_queue, EXHAUSTIVE_COLLAPSES
 
 
 def nearest_edge_ids(points, xy, keys):
@@ -125,3 +125,15 @@ def test_the_size_rule_picks_the_documented_queue():
     pts, _ = datasets.star(100, noise=0.01)
     assert otjax.reconstruct_curve(pts, n_vertices=10).params["queue"] == "exhaustive"
     assert otjax.reconstruct_curve(pts, n_vertices=10, queue="parallel").params["queue"] == "parallel"
+
+
+@pytest.mark.parametrize("n_points, target, expected", [
+    (50, 10, 50), (2000, 10, 2000),  # every point up to 2000
+    (2001, 10, 2000), (4000, 10, 2000), (4001, 10, 2000), (1_000_000, 10, 2000),  # no jump at any size
+    (3000, 150, 3000), (10_000, 150, 3000), (10_000, None, 2000),  # 20 per target vertex; tolerance mode
+])
+def test_the_initial_subset_rule(n_points, target, expected):
+    assert default_initial_vertices(n_points, target) == expected
+    # The documented queue follows: exhaustive for every default run of a 10-vertex target.
+    if target == 10:
+        assert default_queue(expected, target) == "exhaustive"
