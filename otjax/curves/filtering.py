@@ -18,6 +18,8 @@ Two tests, both decided by the data:
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 from scipy.spatial import cKDTree
 
@@ -35,10 +37,14 @@ CHORD_FACTOR = 8.0
 
 
 def segment_sqdist(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """``(n,)`` squared distances of points ``p (n, 2)`` to the segment ``[a, b]``."""
+    """``(n,)`` squared distances of points ``p (n, 2)`` to the segment ``[a, b]``.
+
+    Each row's value depends on that row alone (no BLAS product, whose
+    rounding can depend on the row's place in the array), so a subset of
+    the points gets bitwise the distances the whole array gets."""
     d = b - a
     dd = float(d @ d)
-    t = np.clip((p - a) @ d / dd, 0.0, 1.0) if dd > 0 else np.zeros(len(p))
+    t = np.clip(((p[:, 0] - a[0]) * d[0] + (p[:, 1] - a[1]) * d[1]) / dd, 0.0, 1.0) if dd > 0 else np.zeros(len(p))
     q = a + t[:, None] * d
     return ((p - q) ** 2).sum(1)
 
@@ -129,8 +135,12 @@ def redundant_chords(keys: list[tuple[int, int]], xy: np.ndarray, edge_points: l
     if not total > 0:
         return kept
     noise2 = sum(float(w @ d) for w, d in zip(weight, own)) / total
+    # Per edge of a cycle, its points' squared distance to the nearest other
+    # kept edge and which edge that is. Edges only go, so a dropped edge
+    # changes the rows whose nearest it was and nothing else.
+    nearest: dict[int, _Nearest] = {}
     while True:
-        alive = [i for i in np.flatnonzero(kept)]
+        alive = [int(i) for i in np.flatnonzero(kept)]
         cycles = _triangles([keys[i] for i in alive])
         if not cycles:
             return kept
@@ -140,11 +150,34 @@ def redundant_chords(keys: list[tuple[int, int]], xy: np.ndarray, edge_points: l
             if not w.sum() > 0:
                 score = 0.0
             else:
-                others = [i for i in alive if i != e]
-                d2 = np.min([segment_sqdist(points[edge_points[e]], *seg[i]) for i in others], axis=0)
-                score = float(w @ d2) / float(w.sum())
+                if e not in nearest:
+                    nearest[e] = _nearest_other(points[edge_points[e]], seg, e, alive)
+                score = float(w @ nearest[e].d2) / float(w.sum())
             if score < best_score:
                 best, best_score = e, score
         if best_score > CHORD_FACTOR * noise2:
             return kept
         kept[best] = False
+        alive.remove(best)
+        for e, near in nearest.items():
+            stale = np.flatnonzero(near.edge == best)
+            if len(stale) and e != best:
+                fresh = _nearest_other(points[edge_points[e][stale]], seg, e, alive)
+                near.d2[stale], near.edge[stale] = fresh.d2, fresh.edge
+
+
+class _Nearest(NamedTuple):
+    """Per point: squared distance to the nearest other kept edge, and that edge."""
+
+    d2: np.ndarray
+    edge: np.ndarray
+
+
+def _nearest_other(p: np.ndarray, seg: np.ndarray, e: int, alive: list[int]) -> _Nearest:
+    """:class:`_Nearest` of the points ``p`` among the ``alive`` edges but ``e``."""
+    others = [i for i in alive if i != e]
+    if not others:
+        return _Nearest(np.full(len(p), np.inf), np.full(len(p), -1, np.int64))
+    d2 = np.array([segment_sqdist(p, *seg[i]) for i in others]).reshape(len(others), len(p))
+    k = d2.argmin(0)
+    return _Nearest(d2[k, np.arange(len(p))], np.asarray(others, np.int64)[k])

@@ -3,12 +3,15 @@ the defaults of reconstruct_curve."""
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 import otjax
 from otjax import datasets, metrics
 from otjax.background import estimate_background
 from otjax.curves import filtering
 from otjax.curves.reconstruct import default_initial_vertices, default_queue, EXHAUSTIVE_COLLAPSES
+from tests.profiles import examples  # CI count, thorough count (--hypothesis-profile=thorough)
 
 
 def nearest_edge_ids(points, xy, keys):
@@ -48,6 +51,61 @@ def test_a_true_triangle_keeps_its_sides():
     points = a + t[:, None] * (b - a) + 0.02 * rng.standard_normal((600, 2))
     kept = filtering.redundant_chords(keys, xy, nearest_edge_ids(points, xy, keys), points, np.ones(600))
     assert kept.all()
+
+
+def chords_from_scratch(keys, xy, edge_points, points, mass):
+    """Oracle of redundant_chords: every round, every cycle edge's points measured
+    against every other kept edge, the straight way."""
+    kept = np.ones(len(keys), bool)
+    seg = [(xy[a], xy[b]) for a, b in keys]
+    w = [mass[ids] for ids in edge_points]
+    total = sum(x.sum() for x in w)
+    noise2 = sum(x @ filtering.segment_sqdist(points[ids], *seg[i]) for i, (x, ids) in
+                 enumerate(zip(w, edge_points))) / total
+    while True:
+        alive = list(np.flatnonzero(kept))
+        live = {keys[i] for i in alive}
+        in_cycle = set()
+        for i in alive:
+            a, b = keys[i]
+            for j in alive:
+                c = set(keys[j]) - {a, b}
+                if len(c) == 1 and tuple(sorted((a, *c))) in live and tuple(sorted((b, *c))) in live:
+                    in_cycle.add(i)
+        if not in_cycle:
+            return kept
+        scores = {}
+        for e in sorted(in_cycle):
+            if not w[e].sum() > 0:
+                scores[e] = 0.0
+                continue
+            d2 = np.min([filtering.segment_sqdist(points[edge_points[e]], *seg[i]) for i in alive if i != e], 0)
+            scores[e] = float(w[e] @ d2) / float(w[e].sum())
+        best = min(scores, key=lambda e: (scores[e], e))
+        if scores[best] > filtering.CHORD_FACTOR * noise2:
+            return kept
+        kept[best] = False
+
+
+@settings(max_examples=examples(100, 1000))
+@given(seed=st.integers(0, 2**32 - 1), n_vertices=st.integers(3, 9), n_points=st.integers(20, 300),
+       noise=st.sampled_from([0.002, 0.02, 0.1]))
+def test_chord_removal_matches_the_oracle_on_random_complete_graphs(seed, n_vertices, n_points, noise):
+    """Many overlapping 3-cycles (a near-complete graph), points near some edges:
+    the kept edges are exactly the oracle's, round after round of removals."""
+    rng = np.random.default_rng(seed)
+    xy = rng.random((n_vertices, 2))
+    keys = [(a, b) for a in range(n_vertices) for b in range(a + 1, n_vertices) if rng.random() < 0.8]
+    on = rng.integers(0, len(keys), n_points)
+    t = rng.random(n_points)
+    ends = np.array([[xy[a], xy[b]] for a, b in keys])[on]
+    points = ends[:, 0] + t[:, None] * (ends[:, 1] - ends[:, 0]) + noise * rng.standard_normal((n_points, 2))
+    mass = rng.choice([0.0, 0.5, 1.0, 2.0], n_points, p=[0.1, 0.3, 0.4, 0.2])
+    edge_points = nearest_edge_ids(points, xy, keys)
+    if not mass.sum() > 0:
+        return
+    got = filtering.redundant_chords(keys, xy, edge_points, points, mass)
+    np.testing.assert_array_equal(got, chords_from_scratch(keys, xy, edge_points, points, mass))
 
 
 def test_no_background_keeps_everything():
