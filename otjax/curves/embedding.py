@@ -100,15 +100,18 @@ def locate_in(tri, points: np.ndarray, faces: list[int]) -> np.ndarray:
     return np.asarray(faces, np.int64)[hit]
 
 
-def _star_guess(tri, points: np.ndarray) -> np.ndarray:
-    """Per point, a triangle of the star of its nearest live vertex that
-    holds it (exact, perturbed test), or ``-1``.
+# The stars of this many nearest vertices are tried for a point before the
+# test against every triangle.
+NEAREST_STARS = 8
 
-    The containing triangle almost always has the nearest vertex as a
-    corner; the few points where it does not are left to the caller.
-    Everything is arrays and a k-d tree: no LAPACK call, whose threads
-    fight the kernels' for the cores (Qhull's own location computes a
-    LAPACK transform per triangle).
+
+def _star_guess(tri, points: np.ndarray, vertex: np.ndarray) -> np.ndarray:
+    """Per point, a triangle of the star of ``vertex (n,)`` that holds it
+    (exact, perturbed test), or ``-1``.
+
+    Everything is arrays: no LAPACK call, whose threads fight the kernels'
+    for the cores (Qhull's own location computes a LAPACK transform per
+    triangle).
     """
     tris = tri.triangles()
     fid = np.asarray(tri.triangle_ids(), np.int64)
@@ -116,13 +119,10 @@ def _star_guess(tri, points: np.ndarray) -> np.ndarray:
     order = np.argsort(corner, kind="stable")
     row_of = np.repeat(np.arange(len(tris)), 3)[order]
     start = np.searchsorted(corner[order], np.arange(len(tri.xy) + 1))
-    live = np.unique(corner)
-    _, nearest = cKDTree(tri.xy[live]).query(points)
-    v = live[nearest]
-    count = start[v + 1] - start[v]
+    count = start[vertex + 1] - start[vertex]
     point_of = np.repeat(np.arange(len(points)), count)
     slot = np.arange(len(point_of)) - np.repeat(np.cumsum(count) - count, count)
-    row = row_of[start[v][point_of] + slot]
+    row = row_of[start[vertex][point_of] + slot]
     hit = in_triangle_perturbed(tri.xy[tris[row]], points[point_of])
     out = np.full(len(points), -1, np.int64)
     # Reversed, so that the first hit of a point is the one that stays.
@@ -134,10 +134,13 @@ def locate(tri, points: np.ndarray) -> np.ndarray:
     """Triangle holding each perturbed point, over the whole triangulation.
 
     Each point is tested against the star of its nearest vertex (a k-d
-    tree query and one vectorised exact test); whatever is left goes
-    through an exact test against every triangle in chunks: simple, exact
-    and slow, which is fine because it is rare and the collapse loop never
-    calls it (it relocates locally).
+    tree query and one vectorised exact test), which almost always holds
+    it; the points left, against the stars of their next nearest vertices,
+    up to :data:`NEAREST_STARS`; whatever is still left, against every
+    triangle in chunks: simple, exact and slow, which is fine because it
+    is rare and the collapse loop never calls it (it relocates locally).
+    The holding triangle is unique (symbolic perturbation), so the order
+    of the tests does not change the answer.
 
     Args:
       points: ``(n, 2)`` points inside the pinned box.
@@ -148,8 +151,20 @@ def locate(tri, points: np.ndarray) -> np.ndarray:
     points = np.asarray(points, np.float64).reshape(-1, 2)
     if not len(points):
         return np.zeros(0, np.int64)
-    out = _star_guess(tri, points)
+    live = np.unique(tri.triangles().ravel())
+    tree = cKDTree(tri.xy[live])
+    _, nearest = tree.query(points)
+    out = _star_guess(tri, points, live[nearest])
     rest = np.flatnonzero(out < 0)
+    if len(rest):
+        k = min(NEAREST_STARS, len(live))
+        _, near = tree.query(points[rest], k=k)
+        for rank in range(1, k):
+            out[rest] = _star_guess(tri, points[rest], live[near[:, rank]])
+            found = out[rest] >= 0
+            rest, near = rest[~found], near[~found]
+            if not len(rest):
+                break
     if len(rest):
         ids = tri.triangle_ids()
         chunk = max(1, 2_000_000 // max(len(ids), 1))

@@ -1,6 +1,7 @@
 """The filtered JAX point location against the exact host predicate."""
 
 import numpy as np
+import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
@@ -90,3 +91,23 @@ def test_whole_triangulation_location_equals_the_exact_predicate(kind, n, seed, 
     assert (inside.sum(1) == 1).all()
     ids = np.asarray(tri.triangle_ids())
     np.testing.assert_array_equal(tri.locate(queries), ids[inside.argmax(1)])
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_points_outside_their_nearest_vertex_star_are_located_exactly(seed):
+    """A triangulation of 40 of 3000 points: many points lie in no triangle of
+    their nearest vertex's star (tried next: the stars of the next nearest,
+    then every triangle); every answer matches the exhaustive test."""
+    rng = np.random.default_rng(seed)
+    pts = rng.random((3000, 2)) * [4.0, 1.0]
+    tri = Triangulation(pts[:40])
+    t = tri.triangles()
+    a, p = all_pairs(tri, pts)
+    inside = in_triangle_perturbed(a, p).reshape(len(pts), len(t))
+    ids = np.asarray(tri.triangle_ids())
+    want = ids[inside.argmax(1)]
+    live = np.flatnonzero(tri.alive)
+    nearest = live[np.argmin(((pts[:, None] - tri.xy[live][None]) ** 2).sum(-1), 1)]
+    in_star = np.array([v in tri.tri[f] for v, f in zip(nearest, want)])
+    assert (~in_star).sum() >= 10  # the case under test occurs
+    np.testing.assert_array_equal(tri.locate(pts), want)
