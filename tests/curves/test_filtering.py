@@ -87,7 +87,7 @@ def chords_from_scratch(keys, xy, edge_points, points, mass):
         kept[best] = False
 
 
-@settings(max_examples=examples(100, 1000))
+@settings(max_examples=examples(100, 1000), deadline=None)
 @given(seed=st.integers(0, 2**32 - 1), n_vertices=st.integers(3, 9), n_points=st.integers(20, 300),
        noise=st.sampled_from([0.002, 0.02, 0.1]))
 def test_chord_removal_matches_the_oracle_on_random_complete_graphs(seed, n_vertices, n_points, noise):
