@@ -44,7 +44,8 @@ def segment_sqdist(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
     the points gets bitwise the distances the whole array gets."""
     d = b - a
     dd = float(d @ d)
-    t = np.clip(((p[:, 0] - a[0]) * d[0] + (p[:, 1] - a[1]) * d[1]) / dd, 0.0, 1.0) if dd > 0 else np.zeros(len(p))
+    along = (p[:, 0] - a[0]) * d[0] + (p[:, 1] - a[1]) * d[1]
+    t = np.clip(along / dd, 0.0, 1.0) if dd > 0 else np.zeros(len(p))
     q = a + t[:, None] * d
     return ((p - q) ** 2).sum(1)
 
@@ -159,9 +160,10 @@ def redundant_chords(keys: list[tuple[int, int]], xy: np.ndarray, edge_points: l
             return kept
         kept[best] = False
         alive.remove(best)
+        nearest.pop(best, None)
         for e, near in nearest.items():
             stale = np.flatnonzero(near.edge == best)
-            if len(stale) and e != best:
+            if len(stale):
                 fresh = _nearest_other(points[edge_points[e][stale]], seg, e, alive)
                 near.d2[stale], near.edge[stale] = fresh.d2, fresh.edge
 

@@ -79,7 +79,8 @@ def chords_from_scratch(keys, xy, edge_points, points, mass):
             if not w[e].sum() > 0:
                 scores[e] = 0.0
                 continue
-            d2 = np.min([filtering.segment_sqdist(points[edge_points[e]], *seg[i]) for i in alive if i != e], 0)
+            p = points[edge_points[e]]
+            d2 = np.min([filtering.segment_sqdist(p, *seg[i]) for i in alive if i != e], 0)
             scores[e] = float(w[e] @ d2) / float(w[e].sum())
         best = min(scores, key=lambda e: (scores[e], e))
         if scores[best] > filtering.CHORD_FACTOR * noise2:
