@@ -152,11 +152,12 @@ def _slivers(complex_: SimplicialComplex, angle: float) -> list[TJunction]:
     """One :class:`TJunction` ``(a, b, v)`` per facet flat at its widest corner ``v``, in facet order."""
     x = complex_.positions
     found = []
+    flat = -np.cos(np.radians(angle))  # the cosine bound of _flat
     for t in sorted(complex_.triangles):
-        k = min(range(3), key=lambda i: _cosine(x, t[i - 1], t[i], t[(i + 1) % 3]))  # the widest corner
-        j = TJunction(t[k - 1], t[(k + 1) % 3], t[k])
-        if _flat(x, j.a, j.v, j.b, angle):
-            found.append(j)
+        cosines = [_cosine(x, t[i - 1], t[i], t[(i + 1) % 3]) for i in range(3)]
+        k = int(np.argmin(cosines))  # the widest corner (the first of equals)
+        if cosines[k] <= flat:
+            found.append(TJunction(t[k - 1], t[(k + 1) % 3], t[k]))
     return found
 
 
