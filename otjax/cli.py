@@ -75,7 +75,7 @@ def _curve_parser(sub) -> argparse.ArgumentParser:
     p.add_argument("--background", choices=("auto", "none"),
                    help="estimate uniform background noise and discount it (auto, the default) or not")
     p.add_argument("--keep-chords", action="store_true", default=None,
-                   help="keep the redundant chords of 3-cycles that noise leaves")
+                   help="keep the redundant chords of 3-cycles and spurs at junctions that noise leaves")
     p.add_argument("--relocation", type=int, metavar="K",
                    help="relocate during the last K collapses only (default: 100)")
     p.add_argument("--final-relocations", type=int, metavar="P", help="relocation passes at the end")

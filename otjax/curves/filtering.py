@@ -7,13 +7,15 @@ Two tests, both decided by the data:
   holds significantly more mass than that background puts there; likewise
   an isolated vertex and the disc around it. Without background every edge
   passes.
-* :func:`redundant_chords`: noise can leave a thin triangle of solid edges
-  where the shape has a single corner or a single line: one edge of the
-  3-cycle carries points that the two others would hold almost as well.
-  Such an edge is dropped when its points lie, on average, within a few
-  noise widths of the other kept edges (docs/decisions.md#redundant_chords).
-  A true triangle of the shape keeps its three edges: the points of each
-  side are far from the two others.
+* :func:`redundant_edges`: noise can leave a thin triangle of solid edges
+  where the shape has a single corner or a single line (one edge of the
+  3-cycle carries points that the two others would hold almost as well),
+  or a spur: a short edge from a junction to a free end, a few degrees off
+  a branch that carries the same points. Such an edge is dropped when its
+  points lie, on average, within a few noise widths of the other kept
+  edges (docs/decisions.md#redundant_edges). A true triangle of the shape
+  keeps its three edges and a true branch its edge: their points are far
+  from the other edges.
 """
 
 from __future__ import annotations
@@ -114,9 +116,38 @@ def _triangles(keys: list[tuple[int, int]]) -> list[tuple[int, int, int]]:
     return out
 
 
-def redundant_chords(keys: list[tuple[int, int]], xy: np.ndarray, edge_points: list[np.ndarray],
-                     points: np.ndarray, mass: np.ndarray) -> np.ndarray:
-    """Which kept edges survive the removal of redundant chords of 3-cycles.
+def _spurs(keys: list[tuple[int, int]], xy: np.ndarray) -> list[int]:
+    """Spurs of the graph ``keys`` (as indices into ``keys``): edges from a
+    junction (a vertex of degree 3 or more) to a free end (degree 1) that
+    is nearer the junction than any other vertex of the graph. A free end
+    near another vertex closes, all but one edge, a thin triangle at a
+    corner of the shape, and marks that corner."""
+    degree: dict[int, int] = {}
+    for a, b in keys:
+        degree[a] = degree.get(a, 0) + 1
+        degree[b] = degree.get(b, 0) + 1
+    ids = np.array(sorted(degree))
+    out = []
+    for i, (a, b) in enumerate(keys):
+        end, junction = (a, b) if degree[a] == 1 else (b, a)
+        if degree[end] != 1 or degree[junction] < 3:
+            continue
+        d2 = ((xy[ids] - xy[end]) ** 2).sum(1)
+        d2[ids == end] = np.inf
+        if ids[np.argmin(d2)] == junction:
+            out.append(i)
+    return out
+
+
+def redundant_edges(keys: list[tuple[int, int]], xy: np.ndarray, edge_points: list[np.ndarray],
+                    points: np.ndarray, mass: np.ndarray) -> np.ndarray:
+    """Which kept edges survive the removal of redundant chords and spurs.
+
+    The candidates are the edges of 3-cycles and the spurs (an edge from a
+    junction, of degree 3 or more, to a free end nearer the junction than
+    any other vertex). A candidate is
+    redundant when its points lie, on average, within a few noise widths
+    of the other kept edges.
 
     Args:
       keys: ``m`` kept edges as ``(u, v)`` vertex ids into ``xy``.
@@ -125,8 +156,8 @@ def redundant_chords(keys: list[tuple[int, int]], xy: np.ndarray, edge_points: l
       points, mass: ``(n, 2)``, ``(n,)`` the points and the masses transported.
 
     Returns:
-      ``(m,)`` bool, False for the dropped chords. One edge goes at a time,
-      the most redundant first, until no 3-cycle has a redundant edge.
+      ``(m,)`` bool, False for the dropped edges. One edge goes at a time,
+      the most redundant first, until no candidate is redundant.
     """
     kept = np.ones(len(keys), bool)
     seg = np.array([[xy[a], xy[b]] for a, b in keys]).reshape(-1, 2, 2)
@@ -136,17 +167,19 @@ def redundant_chords(keys: list[tuple[int, int]], xy: np.ndarray, edge_points: l
     if not total > 0:
         return kept
     noise2 = sum(float(w @ d) for w, d in zip(weight, own)) / total
-    # Per edge of a cycle, its points' squared distance to the nearest other
+    # Per candidate, its points' squared distance to the nearest other
     # kept edge and which edge that is. Edges only go, so a dropped edge
     # changes the rows whose nearest it was and nothing else.
     nearest: dict[int, _Nearest] = {}
     while True:
         alive = [int(i) for i in np.flatnonzero(kept)]
-        cycles = _triangles([keys[i] for i in alive])
-        if not cycles:
+        live_keys = [keys[i] for i in alive]
+        candidates = {alive[j] for cyc in _triangles(live_keys) for j in cyc}
+        candidates |= {alive[j] for j in _spurs(live_keys, xy)}
+        if not candidates:
             return kept
         best, best_score = -1, np.inf
-        for e in sorted({alive[j] for cyc in cycles for j in cyc}):
+        for e in sorted(candidates):
             w = weight[e]
             if not w.sum() > 0:
                 score = 0.0

@@ -63,8 +63,8 @@ def result_from_plan(plan: TransportPlan, relevance: float, params: dict, second
 
     Kept: solid edges with relevance ``M_e |e|^2 / (N_e + T_e) >= relevance``
     and ``M_e / |e| >= density * max`` (max over the solid edges); with
-    ``chords``, minus the redundant chords of 3-cycles
-    (:func:`~otjax.curves.filtering.redundant_chords`); with a ``background``
+    ``chords``, minus the redundant chords of 3-cycles and spurs at
+    junctions (:func:`~otjax.curves.filtering.redundant_edges`); with a ``background``
     that was found, minus the edges (and isolated vertices) whose band of
     the input (``input_mass``, default the plan's masses) does not stand out
     of it (:func:`~otjax.curves.filtering.above_background`). Then their
@@ -78,12 +78,17 @@ def result_from_plan(plan: TransportPlan, relevance: float, params: dict, second
     tri = plan.tri
     edge_mass, vertex_mass = vertex_and_edge_masses(plan)
     kept = relevant_edges(plan, edge_mass, relevance, density)
+    spur_ends: set = set()
     if chords and kept.keys:
         points = _points_of(plan, kept.keys)
-        kept = kept.where(filtering.redundant_chords(kept.keys, tri.xy, points, plan.points, plan.mass))
+        before = kept.vertices()
+        kept = kept.where(filtering.redundant_edges(kept.keys, tri.xy, points, plan.points, plan.mass))
+        # A dropped spur's free end held the points the edges kept hold:
+        # it is not reported as an isolated vertex either.
+        spur_ends = before - kept.vertices()
     on_edges = kept.vertices()
     received = set(v for v, m in vertex_mass.items() if m > 0) | _scaffolding_ends(tri.pinned, edge_mass)
-    isolated = sorted(v for v in received if v not in on_edges and not tri.pinned[v])
+    isolated = sorted(v for v in received if v not in on_edges and v not in spur_ends and not tri.pinned[v])
     if background is not None and background.found and (kept.keys or isolated):
         kept, isolated = _above_background(plan, kept, isolated, background,
                                            plan.mass if input_mass is None else input_mass)

@@ -71,8 +71,8 @@ def reconstruct_curve(points, masses=None, n_vertices: int | None = None, *, tol
         not stand out of the background are dropped at the end
         (:func:`otjax.curves.filtering.above_background`). Without background (clean or merely noisy input)
         nothing changes. ``"none"``: no estimate.
-      chords: drop the redundant chords of 3-cycles of solid edges that noise leaves
-        (:func:`otjax.curves.filtering.redundant_chords`).
+      chords: drop the redundant chords of 3-cycles of solid edges and the spurs at junctions
+        that noise leaves (:func:`otjax.curves.filtering.redundant_edges`).
       relocation: relocate the vertices of the modified one-ring after each of the last ``relocation``
         collapses (paper and default: 100); ``None``: after every collapse (as the C++ reference does);
         ``0`` disables. Ignored in pure tolerance mode, where the end is not known ahead.
