@@ -49,6 +49,9 @@ PROBES = 2
 #: A point farther than this many residual scales from the flat through its
 #: neighbours is off the shape (:func:`near_shape`).
 FLAT_SIGMAS = 5.0
+#: Neighbours of the flats :func:`flat_noise` measures the noise about:
+#: fewer follow the noise (docs/decisions.md#feature_fit).
+NOISE_NEIGHBOURS = 32
 # Median absolute residual to standard deviation, for Gaussian residuals.
 _MAD_TO_SIGMA = 1.4826
 
@@ -158,6 +161,35 @@ def _flats(near: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return centre, np.linalg.eigh(np.einsum("nki,nkj->nij", w * spread, spread))[1][:, :, 0]
 
 
+def _local_flats(points: np.ndarray, weights: np.ndarray, neighbours: int):
+    """Per point, the weighted least-squares flat of its ``neighbours``
+    nearest points (itself left out) and their median distance to it:
+    ``(centre (n, d), normal (n, d), local (n,))``."""
+    idx = cKDTree(points).query(points, neighbours + 1)[1][:, 1:]
+    near = points[idx]  # (n, k, d)
+    centre, normal = _flats(near, weights[idx])
+    local = np.median(np.abs(np.einsum("nkd,nd->nk", near - centre[:, None], normal)), axis=1)
+    return centre, normal, local
+
+
+def flat_noise(points: np.ndarray, neighbours: int = NOISE_NEIGHBOURS) -> float:
+    """The standard deviation of the points about the shape they sample.
+
+    The median over the points of their neighbours' median distance to
+    the flat (a plane in 3D, a line in 2D) through them, scaled to a
+    standard deviation for Gaussian residuals: about ``sigma`` for noise of
+    standard deviation ``sigma`` well below the neighbourhoods' width (a
+    flat through neighbours as thick as they are wide follows the noise,
+    and the estimate falls short), unmoved by creases and corners (a
+    minority of the points), 0 on exact flats.
+
+    Args:
+      points: ``(n, d)`` float64 points, ``d`` in 2 or 3, ``n > neighbours``.
+    """
+    points = np.asarray(points, np.float64)
+    return _MAD_TO_SIGMA * float(np.median(_local_flats(points, np.ones(len(points)), neighbours)[2]))
+
+
 def near_shape(points: np.ndarray, weights: np.ndarray, neighbours: int = NEIGHBOURS,
                sigmas: float = FLAT_SIGMAS) -> np.ndarray:
     """Which points lie on the flat (a plane in 3D, a line in 2D) through their neighbours.
@@ -182,11 +214,7 @@ def near_shape(points: np.ndarray, weights: np.ndarray, neighbours: int = NEIGHB
       ``(n,)`` bool, True where the point is near the shape.
     """
     points = np.asarray(points, np.float64)
-    idx = cKDTree(points).query(points, neighbours + 1)[1][:, 1:]  # the point itself left out
-    near = points[idx]  # (n, k, d)
-    centre, normal = _flats(near, weights[idx])
-    residual = np.abs(np.einsum("nkd,nd->nk", near - centre[:, None], normal))
-    local = np.median(residual, axis=1)
+    centre, normal, local = _local_flats(points, weights, neighbours)
     # The floor: on exact flats every residual is a rounding error.
     floor = 1e-9 * float(np.linalg.norm(np.ptp(points, axis=0)))
     scale = _MAD_TO_SIGMA * np.maximum(np.maximum(local, np.median(local[weights > 0])), floor)

@@ -6,7 +6,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from otjax import datasets, datasets3d
-from otjax.background import estimate_background, near_shape, shape_weights
+from otjax.background import estimate_background, flat_noise, near_shape, shape_weights
 
 
 def uneven_star(n=3000, noise=0.01, seed=0):
@@ -161,3 +161,23 @@ def test_near_shape_leaves_the_surface_and_drops_most_outliers_around_a_cylinder
     kept_before = w[3000:].sum()
     assert kept_before > 100  # the premise: density alone leaves the outliers real mass
     assert (w[3000:] * near[3000:]).sum() < 0.5 * kept_before
+
+
+@pytest.mark.parametrize("sigma", [0.0, 0.002, 0.005])
+@pytest.mark.parametrize("fold", [None, 60.0])
+def test_flat_noise_reads_the_noise_of_a_sheet_with_or_without_a_crease(sigma, fold):
+    """Gaussian noise across a unit square (or two half squares folded at a
+    crease), rotated and scaled: the estimate is the standard deviation to
+    within 10% (noise a tenth of the neighbourhoods' width), 0 when exact."""
+    rng = np.random.default_rng(int(sigma * 1e4 + (fold or 0)))
+    u, y = rng.random(4000), rng.random(4000)
+    a = np.radians(fold or 180.0)
+    folded = np.c_[0.5 - (u - 0.5) * np.cos(a), y, (u - 0.5) * np.sin(a)]
+    sheet = np.where((u < 0.5)[:, None], np.c_[u, y, 0 * u], folded)
+    points = sheet + sigma * rng.standard_normal((4000, 3))
+    rotation = np.linalg.qr(rng.standard_normal((3, 3)))[0]
+    got = flat_noise(points @ rotation * 7.0 + 3.0) / 7.0
+    if sigma == 0:
+        assert got < 1e-9
+    else:
+        assert abs(got - sigma) <= 0.1 * sigma

@@ -34,6 +34,7 @@ from typing import NamedTuple
 import numpy as np
 from scipy.spatial import cKDTree
 
+from otjax.background import NOISE_NEIGHBOURS, flat_noise
 from otjax.metrics3d import edge_sharpness
 from otjax.surfaces.fit_input import (VertexFit, checked, uniform_end, unit_normals, vertex_facets,
                                       without_flattening)
@@ -67,9 +68,13 @@ FLOOR = 0.01
 #: many times ``r`` of the line end (docs/decisions.md#feature_fit).
 TUBE = 0.1
 #: A border vertex on one sharp edge moves only where the root mean square
-#: residual of each of its two fitted planes is at most this many times ``r``
+#: residual of each of its two fitted planes is at most this many times ``r``,
+#: or :data:`NOISE_MARGIN` times the points' noise if that is more
 #: (docs/decisions.md#feature_fit).
 THIN = 0.03
+#: Planes as thick as the points' noise (:func:`otjax.background.flat_noise`)
+#: times this are thin.
+NOISE_MARGIN = 1.5
 
 
 #: What :func:`fit_creases` returns: the positions after the fit and the rows that moved.
@@ -92,7 +97,9 @@ def fit_creases(vertices, triangles, points, sharp_angle: float = SHARP_ANGLE) -
     two or more triangles: :func:`otjax.metrics3d.edge_sharpness`) is a
     crease vertex, and so is a vertex of the open border on one (where a
     crease ends), if its two fitted planes are thin (root mean square
-    residual at most :data:`THIN` ``* r``). Its facets are grouped by
+    residual at most :data:`THIN` ``* r``, or :data:`NOISE_MARGIN` times
+    the points' noise, :func:`~otjax.background.flat_noise`, if that is
+    more). Its facets are grouped by
     normal (within :data:`PLANE_ANGLE`, in increasing row order); with
     ``r`` the median length of its edges, the points within ``r`` of it are
     shared among the groups' planes and the planes refitted (module doc;
@@ -142,11 +149,12 @@ def fit_creases(vertices, triangles, points, sharp_angle: float = SHARP_ANGLE) -
     facets = vertex_facets(triangles)
     tree = cKDTree(points)
     min_cos = np.cos(np.radians(PLANE_ANGLE))
+    thick = NOISE_MARGIN * flat_noise(points) if len(points) > NOISE_NEIGHBOURS else 0.0
     moved = []
     for v in np.flatnonzero((count >= 2) | ((count == 1) & border)).tolist():
         own = np.array([f for f in facets[v] if np.any(normal[f])], np.int64)
         target = _target(v, own, vertices, triangles, normal, points, tree, min_cos, np.radians(sharp_angle),
-                         np.array(along[v], np.int64) if border[v] else None)
+                         np.array(along[v], np.int64) if border[v] else None, thick)
         if target is not None:
             out[v] = target
             moved.append(v)
@@ -154,10 +162,11 @@ def fit_creases(vertices, triangles, points, sharp_angle: float = SHARP_ANGLE) -
 
 
 def _target(v, own, vertices, triangles, normal, points, tree, min_cos, sharp,
-            end_of: np.ndarray | None) -> np.ndarray | None:
+            end_of: np.ndarray | None, noise: float) -> np.ndarray | None:
     """Where crease vertex ``v`` (facets ``own``) moves, or ``None`` if it
     stays; ``end_of``: where ``v`` is on the open border, its neighbours
-    along crease edges (:func:`_crease_end`), else ``None``."""
+    along crease edges (:func:`_crease_end`), else ``None``; ``noise``: a
+    plane's residual the points' noise accounts for."""
     ring = np.setdiff1d(triangles[own], [v])
     lengths = np.linalg.norm(vertices[ring] - vertices[v], axis=1)
     if not len(lengths) or not lengths.min() > 0:
@@ -172,7 +181,7 @@ def _target(v, own, vertices, triangles, normal, points, tree, min_cos, sharp,
         return None
     # One sharp edge is weaker evidence of a crease than two: on coarse
     # complexes a plane fitted across two faces tilts and moves the end far.
-    if end_of is not None and len(end_of) == 1 and np.any(tolerance / TRIM > THIN * reach):
+    if end_of is not None and len(end_of) == 1 and np.any(tolerance / TRIM > max(THIN * reach, noise)):
         return None
     if len(n) == 2:  # the nearest point of the line n x = c
         target = vertices[v] - n.T @ np.linalg.solve(n @ n.T, n @ vertices[v] - c)
