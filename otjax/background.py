@@ -161,7 +161,8 @@ def _flats(near: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return centre, np.linalg.eigh(np.einsum("nki,nkj->nij", w * spread, spread))[1][:, :, 0]
 
 
-def _local_flats(points: np.ndarray, weights: np.ndarray, neighbours: int):
+def _local_flats(points: np.ndarray, weights: np.ndarray,
+                 neighbours: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Per point, the weighted least-squares flat of its ``neighbours``
     nearest points (itself left out) and their median distance to it:
     ``(centre (n, d), normal (n, d), local (n,))``."""

@@ -145,9 +145,8 @@ def redundant_edges(keys: list[tuple[int, int]], xy: np.ndarray, edge_points: li
 
     The candidates are the edges of 3-cycles and the spurs (an edge from a
     junction, of degree 3 or more, to a free end nearer the junction than
-    any other vertex). A candidate is
-    redundant when its points lie, on average, within a few noise widths
-    of the other kept edges.
+    any other vertex). A candidate is redundant when its points lie, on
+    average, within a few noise widths of the other kept edges.
 
     Args:
       keys: ``m`` kept edges as ``(u, v)`` vertex ids into ``xy``.

@@ -149,12 +149,12 @@ def fit_creases(vertices, triangles, points, sharp_angle: float = SHARP_ANGLE) -
     facets = vertex_facets(triangles)
     tree = cKDTree(points)
     min_cos = np.cos(np.radians(PLANE_ANGLE))
-    thick = NOISE_MARGIN * flat_noise(points) if len(points) > NOISE_NEIGHBOURS else 0.0
+    noise = NOISE_MARGIN * flat_noise(points) if len(points) > NOISE_NEIGHBOURS else 0.0
     moved = []
     for v in np.flatnonzero((count >= 2) | ((count == 1) & border)).tolist():
         own = np.array([f for f in facets[v] if np.any(normal[f])], np.int64)
         target = _target(v, own, vertices, triangles, normal, points, tree, min_cos, np.radians(sharp_angle),
-                         np.array(along[v], np.int64) if border[v] else None, thick)
+                         np.array(along[v], np.int64) if border[v] else None, noise)
         if target is not None:
             out[v] = target
             moved.append(v)
