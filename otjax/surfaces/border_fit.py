@@ -57,7 +57,8 @@ def fit_border(vertices, triangles, points, flat_angle: float = FLAT_ANGLE) -> B
     ``|(p - v).out| <= L``; with at least :data:`MIN_POINTS` of them, ``v``
     moves along ``out`` to where their ``(p - v).out`` end
     (:func:`~otjax.surfaces.fit_input.uniform_end`: past the largest by
-    their mean spacing; outward, or inward where the points end before it).
+    their mean spacing; outward, or inward where the points end before it,
+    but by at most ``L / 2``: the vertex stays where they end further in).
     Moves that would flatten a triangle are undone
     (:func:`~otjax.surfaces.fit_input.without_flattening`).
 
@@ -140,7 +141,11 @@ def _step(v, neighbours, vertices, triangles, normal, facets, points, tree, cos_
     strip = (np.abs(t) <= reach / 2) & (np.abs(h) <= reach / 10) & (np.abs(o) <= reach)
     if strip.sum() < MIN_POINTS:
         return None
-    return uniform_end(o[strip]) * across
+    # Points ending over half an edge inside the vertex are not its
+    # border's: around a vertex whose fan opens inwards (facets filtered or
+    # folded away) the strip lies across the shape.
+    end = uniform_end(o[strip])
+    return end * across if end >= -reach / 2 else None
 
 
 def _straightest(v: int, neighbours: list[int], vertices: np.ndarray) -> tuple[int, int]:

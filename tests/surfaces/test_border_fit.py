@@ -114,6 +114,22 @@ def test_the_strip_reaches_its_corners_and_no_further():
     np.testing.assert_allclose(fit.vertices[3], [0.5, 0.1 - end, 0.0], rtol=0, atol=1e-12)
 
 
+@pytest.mark.parametrize("inside, moves", [(0.15, True), (0.25, False)])
+def test_a_vertex_moves_inward_by_at_most_half_its_edge(inside, moves):
+    # Vertex 3 at (0.5, 0.1), border edges 0.4 long; the points stop ``inside`` above the border
+    # (y >= 0.1 + inside), the strip keeps some: the vertex moves up to their end only within 0.2.
+    v, t = grid_square(3, 0.1)
+    g = np.linspace(0.0, 1.0, 81)
+    grid = np.c_[np.stack(np.meshgrid(g, g), -1).reshape(-1, 2), np.zeros(81 * 81)]
+    points = grid[grid[:, 1] >= 0.1 + inside]
+    fit = fit_border(v, t, points)
+    assert (3 in fit.moved) == moves
+    if moves:
+        assert abs(fit.vertices[3, 1] - (0.1 + inside)) < 0.02
+    else:
+        np.testing.assert_array_equal(fit.vertices[3], v[3])
+
+
 def test_nothing_moves_without_triangles_or_points():
     v, t = grid_square(3, 0.1)
     assert fit_border(v, t, np.zeros((0, 3))).moved.size == 0
