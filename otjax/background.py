@@ -49,6 +49,11 @@ PROBES = 2
 #: A point farther than this many residual scales from the flat through its
 #: neighbours is off the shape (:func:`near_shape`).
 FLAT_SIGMAS = 5.0
+#: A point off the flat through its neighbours is still on the shape when it
+#: lies on this many of its neighbours' thin flats: those whose residuals are
+#: within ``THIN`` median scales (:func:`near_shape`, docs/decisions.md#background).
+SUPPORTING_FLATS = 2
+THIN = 2.0
 #: Neighbours of the flats :func:`flat_noise` measures the noise about:
 #: fewer follow the noise (docs/decisions.md#feature_fit).
 NOISE_NEIGHBOURS = 32
@@ -162,15 +167,35 @@ def _flats(near: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _local_flats(points: np.ndarray, weights: np.ndarray,
-                 neighbours: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                 neighbours: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Per point, the weighted least-squares flat of its ``neighbours``
     nearest points (itself left out) and their median distance to it:
-    ``(centre (n, d), normal (n, d), local (n,))``."""
+    ``(centre (n, d), normal (n, d), local (n,), idx (n, k))``, ``idx`` the
+    neighbours' indices."""
     idx = cKDTree(points).query(points, neighbours + 1)[1][:, 1:]
     near = points[idx]  # (n, k, d)
     centre, normal = _flats(near, weights[idx])
     local = np.median(np.abs(np.einsum("nkd,nd->nk", near - centre[:, None], normal)), axis=1)
-    return centre, normal, local
+    return centre, normal, local, idx
+
+
+def _near_a_neighbours_flat(points: np.ndarray, weights: np.ndarray, idx: np.ndarray, which: np.ndarray,
+                            sigmas: float, floor_scale: float) -> np.ndarray:
+    """For the points ``which (m,)``: whether at least :data:`SUPPORTING_FLATS`
+    of their neighbours' flats, each refitted without the point itself, pass
+    within ``sigmas`` of that neighbour's residual scale of it: ``(m,) bool``."""
+    m, k = len(which), idx.shape[1]
+    nbr = idx[which]  # (m, k)
+    hood = idx[nbr]  # (m, k, k): each neighbour's own neighbours
+    others = hood != which[:, None, None]  # the point itself left out
+    near = points[hood].reshape(m * k, k, -1)
+    centre, normal = _flats(near, (weights[hood] * others).reshape(m * k, k))
+    resid = np.abs(np.einsum("nkd,nd->nk", near - centre[:, None], normal)).reshape(m, k, k)
+    local = np.nanmedian(np.where(others, resid, np.nan), axis=2)
+    gap = np.abs(np.einsum("mkd,mkd->mk", points[which][:, None] - centre.reshape(m, k, -1),
+                           normal.reshape(m, k, -1)))
+    tol = sigmas * _MAD_TO_SIGMA * floor_scale
+    return np.count_nonzero((gap <= tol) & (local <= floor_scale * THIN), axis=1) >= SUPPORTING_FLATS
 
 
 def flat_noise(points: np.ndarray, neighbours: int = NOISE_NEIGHBOURS) -> float:
@@ -205,7 +230,11 @@ def near_shape(points: np.ndarray, weights: np.ndarray, neighbours: int = NEIGHB
     at most ``sigmas`` scales. Where one flat does not fit (a crease, a
     corner) the neighbours' own residuals are large, and so is the scale:
     the point stays. Outliers close together raise each other's scale and
-    may stay.
+    may stay. A point off that flat still stays when it lies within
+    ``sigmas`` median scales of at least :data:`SUPPORTING_FLATS` of its
+    neighbours' own flats that are thin (residuals within :data:`THIN`
+    median scales), each refitted without the point: a point of a sheet at
+    a crease whose neighbours lean to the other sheet.
 
     Args:
       points: ``(n, d)`` float64 points, ``d`` in 2 or 3, ``n > k``.
@@ -215,8 +244,13 @@ def near_shape(points: np.ndarray, weights: np.ndarray, neighbours: int = NEIGHB
       ``(n,)`` bool, True where the point is near the shape.
     """
     points = np.asarray(points, np.float64)
-    centre, normal, local = _local_flats(points, weights, neighbours)
+    centre, normal, local, idx = _local_flats(points, weights, neighbours)
     # The floor: on exact flats every residual is a rounding error.
-    floor = 1e-9 * float(np.linalg.norm(np.ptp(points, axis=0)))
-    scale = _MAD_TO_SIGMA * np.maximum(np.maximum(local, np.median(local[weights > 0])), floor)
-    return np.abs(np.einsum("nd,nd->n", points - centre, normal)) <= sigmas * scale
+    floor = max(float(np.median(local[weights > 0])), 1e-9 * float(np.linalg.norm(np.ptp(points, axis=0))))
+    near = np.abs(np.einsum("nd,nd->n", points - centre, normal)) <= sigmas * _MAD_TO_SIGMA * np.maximum(local, floor)
+    # Second chance where one flat does not fit: a point of a sheet at a
+    # crease whose neighbours are mostly on the other sheet, or at a border
+    # where they lean to one side, lies on some neighbour's flat.
+    off = np.flatnonzero(~near)
+    near[off] = _near_a_neighbours_flat(points, weights, idx, off, sigmas, floor)
+    return near
