@@ -172,7 +172,10 @@ def _closed_form(cost: np.ndarray, mass: np.ndarray, free: np.ndarray) -> np.nda
 def _solver() -> highspy.Highs:
     h = getattr(_LOCAL, "highs", None)
     if h is None:
-        h = highspy.Highs()
+        # The bare solver class: highspy's ``Highs`` wrapper enables callbacks on
+        # construction, which makes HiGHS print its banner on stdout before
+        # ``output_flag`` can be set. The calls below are the base class's.
+        h = getattr(highspy, "_Highs", highspy.Highs)()
         h.setOptionValue("output_flag", False)
         h.setOptionValue("primal_feasibility_tolerance", TOLERANCE)
         h.setOptionValue("dual_feasibility_tolerance", TOLERANCE)

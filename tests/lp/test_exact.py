@@ -1,5 +1,8 @@
 """The HiGHS solver on stencils whose optimum is known in closed form."""
 
+import subprocess
+import sys
+
 import numpy as np
 import pytest
 
@@ -161,3 +164,17 @@ def test_the_closed_form_is_refused_when_a_cheapest_bin_is_tied_by_uniformity():
     sol = solve_member(lp)
     assert not sol.closed_form
     assert sol.cost == pytest.approx(_linprog_cost(lp), abs=1e-10)
+
+
+def test_a_solve_prints_nothing():
+    """HiGHS writes its banner straight to the process's stdout unless
+    silenced before its first call: a library call must print nothing."""
+    code = ("import numpy as np\n"
+            "from otjax.lp.exact import solve_member\n"
+            "from otjax.lp.problem import LocalLP\n"
+            "lp = LocalLP(np.array([[1.0, 4.0], [4.0, 1.0], [1.0, 2.0]]), np.ones(3), np.array([0.5, 0.5]),\n"
+            "             np.array([0, 0]), np.array([False, False]))\n"
+            "assert solve_member(lp).iterations > 0\n")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout == "" and done.stderr == ""
