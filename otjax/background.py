@@ -166,17 +166,25 @@ def _flats(near: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return centre, np.linalg.eigh(np.einsum("nki,nkj->nij", w * spread, spread))[1][:, :, 0]
 
 
-def _local_flats(points: np.ndarray, weights: np.ndarray,
-                 neighbours: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+class _LocalFlats(NamedTuple):
+    """Per point, the flat of its neighbours: ``centre (n, d)``, unit
+    ``normal (n, d)``, the neighbours' median distance to it ``local (n,)``
+    and their rows ``idx (n, k)``."""
+
+    centre: np.ndarray
+    normal: np.ndarray
+    local: np.ndarray
+    idx: np.ndarray
+
+
+def _local_flats(points: np.ndarray, weights: np.ndarray, neighbours: int) -> _LocalFlats:
     """Per point, the weighted least-squares flat of its ``neighbours``
-    nearest points (itself left out) and their median distance to it:
-    ``(centre (n, d), normal (n, d), local (n,), idx (n, k))``, ``idx`` the
-    neighbours' indices."""
+    nearest points (itself left out) and their median distance to it."""
     idx = cKDTree(points).query(points, neighbours + 1)[1][:, 1:]
     near = points[idx]  # (n, k, d)
     centre, normal = _flats(near, weights[idx])
     local = np.median(np.abs(np.einsum("nkd,nd->nk", near - centre[:, None], normal)), axis=1)
-    return centre, normal, local, idx
+    return _LocalFlats(centre, normal, local, idx)
 
 
 def _near_a_neighbours_flat(points: np.ndarray, weights: np.ndarray, idx: np.ndarray, which: np.ndarray,
@@ -213,7 +221,7 @@ def flat_noise(points: np.ndarray, neighbours: int = NOISE_NEIGHBOURS) -> float:
       points: ``(n, d)`` float64 points, ``d`` in 2 or 3, ``n > neighbours``.
     """
     points = np.asarray(points, np.float64)
-    return _MAD_TO_SIGMA * float(np.median(_local_flats(points, np.ones(len(points)), neighbours)[2]))
+    return _MAD_TO_SIGMA * float(np.median(_local_flats(points, np.ones(len(points)), neighbours).local))
 
 
 def near_shape(points: np.ndarray, weights: np.ndarray, neighbours: int = NEIGHBOURS,
