@@ -58,6 +58,10 @@ MIN_POINTS = 5
 TRIM = 3.0
 #: Rounds of assigning points to planes and refitting them.
 ROUNDS = 4
+#: Of three or more fitted planes, one whose members lie within another's
+#: tolerance for more than this share is no plane of its own and drops
+#: (docs/decisions.md#feature_fit).
+REDUNDANT = 0.5
 #: Of three fitted planes, one whose root mean square residual exceeds this
 #: many times the least of them (or :data:`FLOOR` ``* r``, if larger) is no
 #: plane and drops (docs/decisions.md#feature_fit).
@@ -104,7 +108,11 @@ def fit_creases(vertices, triangles, points, sharp_angle: float = SHARP_ANGLE) -
     ``r`` the median length of its edges, the points within ``r`` of it are
     shared among the groups' planes and the planes refitted (module doc;
     planes that come within :data:`PLANE_ANGLE` of one another merge,
-    planes with fewer than :data:`MIN_POINTS` points drop). With two planes more than
+    planes with fewer than :data:`MIN_POINTS` points drop, and of three or
+    more, one whose points lie within its own tolerance of another plane
+    (more than :data:`REDUNDANT` of them) drops, once a round: a facet
+    across a crease or across the border; where one did, the two or three
+    planes left must be thin as above). With two planes more than
     :data:`PLANE_ANGLE` apart the target is the nearest point of their line
     (for a vertex on the open border, an edge of one triangle, slid along it
     to where the points within :data:`TUBE` ``* r`` of it end, if the vertex
@@ -173,15 +181,17 @@ def _target(v, own, vertices, triangles, normal, points, tree, min_cos, sharp,
         return None
     reach = float(np.median(lengths))
     near = points[tree.query_ball_point(vertices[v], reach)]
-    planes = _fitted(_facet_planes(own, vertices, triangles, normal), near, reach)
-    if planes is None or len(planes.normal) not in (2, 3):
+    fit = _fitted(_facet_planes(own, vertices, triangles, normal), near, reach)
+    if fit is None or len(fit.planes.normal) not in (2, 3):
         return None
+    planes = fit.planes
     n, c, tolerance = planes
     if np.any(np.abs(n @ n.T)[np.triu_indices(len(n), 1)] > min_cos):
         return None
     # One sharp edge is weaker evidence of a crease than two: on coarse
     # complexes a plane fitted across two faces tilts and moves the end far.
-    if end_of is not None and len(end_of) == 1 and np.any(tolerance / TRIM > max(THIN * reach, noise)):
+    if np.any(tolerance / TRIM > max(THIN * reach, noise)) and (
+            fit.pruned or (end_of is not None and len(end_of) == 1)):
         return None
     if len(n) == 2:  # the nearest point of the line n x = c
         target = vertices[v] - n.T @ np.linalg.solve(n @ n.T, n @ vertices[v] - c)
@@ -244,13 +254,24 @@ def _facet_planes(own, vertices, triangles, normal) -> _Planes:
     return _Planes(np.array(rows), np.array(offsets), np.full(len(rows), np.inf))
 
 
-def _fitted(planes: _Planes, near: np.ndarray, reach: float) -> _Planes | None:
+class _Fit(NamedTuple):
+    """Planes fitted to the points around a vertex; ``pruned``: whether a
+    plane dropped as redundant on the way (:func:`_without_redundant`)."""
+
+    planes: _Planes
+    pruned: bool
+
+
+def _fitted(planes: _Planes, near: np.ndarray, reach: float) -> _Fit | None:
     """``planes`` refitted to the points ``near`` (:data:`ROUNDS` rounds:
     each point joins its nearest plane if within that plane's tolerance,
     first :data:`NEAR` ``* reach``, then :data:`TRIM` residuals), of
     three the ones :data:`THICK` times thicker than the thinnest dropped;
-    ``None`` once fewer than two planes have points enough, or are thin."""
+    ``None`` once fewer than two planes have points enough, or are thin.
+    Each round, of three or more planes, one whose members are another's
+    drops (:func:`_without_redundant`)."""
     planes = planes._replace(tolerance=np.full(len(planes.normal), NEAR * reach))
+    pruned = False
     for _ in range(ROUNDS):
         nearest, within = _members(planes, near)
         rows, offsets, spread = [], [], []
@@ -266,13 +287,34 @@ def _fitted(planes: _Planes, near: np.ndarray, reach: float) -> _Planes | None:
         if len(rows) < 2:
             return None
         first = np.unique(_groups(np.array(rows)), return_index=True)[1]
-        planes = _Planes(np.array(rows)[first], np.array(offsets)[first], np.array(spread)[first])
+        fitted = _Planes(np.array(rows)[first], np.array(offsets)[first], np.array(spread)[first])
+        planes = _without_redundant(fitted, near)
+        pruned |= len(planes.normal) < len(fitted.normal)
     if len(planes.normal) != 3:
-        return planes
+        return _Fit(planes, pruned)
     # A corner needs three planes: one much thicker than the thinnest holds
     # the points of other faces that no plane took.
     flat = planes.tolerance <= THICK * max(planes.tolerance.min(), TRIM * FLOOR * reach)
-    return _Planes(*(x[flat] for x in planes)) if flat.sum() >= 2 else None
+    return _Fit(_Planes(*(x[flat] for x in planes)), pruned) if flat.sum() >= 2 else None
+
+
+def _without_redundant(planes: _Planes, near: np.ndarray) -> _Planes:
+    """``planes`` less the one whose members lie most within its own
+    tolerance of another plane, if more than :data:`REDUNDANT` of them do:
+    a plane across a crease (the points along it) or across the open
+    border (the points along the border) takes points that are other
+    planes' own."""
+    nearest, within = _members(planes, near)
+    dist = np.abs(near @ planes.normal.T - planes.offset)  # (n, k)
+    share = np.zeros(len(planes.normal))
+    for g in range(len(planes.normal)):
+        own = within & (nearest == g)
+        if own.any():
+            share[g] = (np.delete(dist[own], g, axis=1) < planes.tolerance[g]).any(axis=1).mean()
+    if len(planes.normal) < 3 or share.max() <= REDUNDANT:
+        return planes
+    keep = np.arange(len(planes.normal)) != share.argmax()
+    return _Planes(*(x[keep] for x in planes))
 
 
 def _members(planes: _Planes, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -220,6 +220,47 @@ def test_a_facet_across_a_crease_end_makes_no_corner_of_other_faces():
     assert np.allclose(fit.vertices[end], [0, 0, 0.005], atol=1e-3)
 
 
+@pytest.mark.parametrize("extra", [[[0, 1, -1], [0, 1, 4]], [[0, 1, -1], [0, 1, 4], [0, -1, 6]]])
+def test_facets_across_a_crease_whose_points_are_the_sheets_own_are_no_planes(extra):
+    # An inner crease vertex has, besides the two sheets' facets, a facet across the crease at its
+    # own height (normal along the crease) and one or two across it diagonally. In the noise their
+    # planes each take a band of the sheets' points and survive the fit, four or five planes in
+    # all (no crease of two or corner of three); their points lie on the sheets' planes, and
+    # dropped, they leave the two sheets: the vertex moves onto the crease.
+    rng = np.random.default_rng(3)
+    width, noise = 0.6, 0.005
+    vertices, triangles, crease, u = folded_sheets(5, np.radians(90), width)
+    v = crease[2]
+    triangles = np.vstack([triangles, v + np.array(extra)])
+    points = sample_sheets(u, width, 3000, rng)
+    points += noise * rng.standard_normal(points.shape)
+    shifted = vertices.copy()
+    shifted[v] += [0.02, 0.015, 0.01]
+
+    fit = fit_creases(shifted, triangles, points)
+
+    assert v in fit.moved.tolist()
+    assert np.allclose(fit.vertices[v], [0, 0, shifted[v, 2]], atol=noise / 2)
+
+
+def test_a_vertex_whose_planes_needed_pruning_stays_between_planes_thicker_than_the_noise():
+    # The facets of the test above, but the points are thick (0.02) only around the vertex and
+    # exact elsewhere: the points' noise reads 0, the two planes left after the pruning are far
+    # thicker than it and than THIN * r, and a crease found among pruned planes must be thin.
+    rng = np.random.default_rng(3)
+    width = 0.6
+    vertices, triangles, crease, u = folded_sheets(5, np.radians(90), width)
+    v = crease[2]
+    triangles = np.vstack([triangles, v + np.array([[0, 1, -1], [0, 1, 4]])])
+    points = sample_sheets(u, width, 3000, rng)
+    close = np.linalg.norm(points - vertices[v], axis=1) < 0.4
+    points[close] += 0.02 * rng.standard_normal((close.sum(), 3))
+    shifted = vertices.copy()
+    shifted[v] += [0.02, 0.015, 0.01]
+
+    assert v not in fit_creases(shifted, triangles, points).moved.tolist()
+
+
 @pytest.mark.parametrize("neighbours, slides", [
     ([[0, 0, 0.3]], True),  # the crease goes on behind the vertex only: an end
     ([[0, 0, 0.3], [0, 0, 0.05]], False),  # and on beyond it, on the line: no end (two vertices on one end)
