@@ -27,6 +27,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import cKDTree
 
+from otjax.background import NOISE_NEIGHBOURS, flat_noise
 from otjax.metrics3d import boundary_edges
 from otjax.surfaces.fit_input import (VertexFit, checked, uniform_end, unit_normals, vertex_facets,
                                       without_flattening)
@@ -57,7 +58,8 @@ def fit_border(vertices, triangles, points, flat_angle: float = FLAT_ANGLE) -> B
     ``|(p - v).out| <= L``; with at least :data:`MIN_POINTS` of them, ``v``
     moves along ``out`` to where their ``(p - v).out`` end
     (:func:`~otjax.surfaces.fit_input.uniform_end`: past the largest by
-    their mean spacing; outward, or inward where the points end before it,
+    their mean spacing, or the quantile that stands for it in the points'
+    noise, :func:`~otjax.background.flat_noise`; outward, or inward where the points end before it,
     but by at most ``L / 2``: the vertex stays where they end further in).
     Moves that would flatten a triangle are undone
     (:func:`~otjax.surfaces.fit_input.without_flattening`).
@@ -102,16 +104,19 @@ def fit_border(vertices, triangles, points, flat_angle: float = FLAT_ANGLE) -> B
     facets = vertex_facets(triangles)
     cos_flat = np.cos(np.radians(flat_angle))
     tree = cKDTree(points)
+    noise = flat_noise(points) if len(points) > NOISE_NEIGHBOURS else 0.0
     moved = []
     for v in sorted(neighbours):
-        step = _step(v, neighbours[v], vertices, triangles, normal, facets.get(v, []), points, tree, cos_flat)
+        step = _step(v, neighbours[v], vertices, triangles, normal, facets.get(v, []), points, tree, cos_flat,
+                     noise)
         if step is not None:
             out[v] = vertices[v] + step
             moved.append(v)
     return without_flattening(vertices, out, triangles, np.asarray(moved, np.int64))
 
 
-def _step(v, neighbours, vertices, triangles, normal, facets, points, tree, cos_flat) -> np.ndarray | None:
+def _step(v, neighbours, vertices, triangles, normal, facets, points, tree, cos_flat,
+          noise: float) -> np.ndarray | None:
     """The move of border vertex ``v``, or ``None`` if it stays (not flat,
     fewer than two border neighbours, a degenerate facet or too few points)."""
     if len(neighbours) < 2 or not facets:
@@ -144,7 +149,7 @@ def _step(v, neighbours, vertices, triangles, normal, facets, points, tree, cos_
     # Points ending over half an edge inside the vertex are not its
     # border's: around a vertex whose fan opens inwards (facets filtered or
     # folded away) the strip lies across the shape.
-    end = uniform_end(o[strip])
+    end = uniform_end(o[strip], noise)
     return end * across if end >= -reach / 2 else None
 
 

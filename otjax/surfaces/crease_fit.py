@@ -157,7 +157,7 @@ def fit_creases(vertices, triangles, points, sharp_angle: float = SHARP_ANGLE) -
     facets = vertex_facets(triangles)
     tree = cKDTree(points)
     min_cos = np.cos(np.radians(PLANE_ANGLE))
-    noise = NOISE_MARGIN * flat_noise(points) if len(points) > NOISE_NEIGHBOURS else 0.0
+    noise = flat_noise(points) if len(points) > NOISE_NEIGHBOURS else 0.0
     moved = []
     for v in np.flatnonzero((count >= 2) | ((count == 1) & border)).tolist():
         own = np.array([f for f in facets[v] if np.any(normal[f])], np.int64)
@@ -173,8 +173,8 @@ def _target(v, own, vertices, triangles, normal, points, tree, min_cos, sharp,
             end_of: np.ndarray | None, noise: float) -> np.ndarray | None:
     """Where crease vertex ``v`` (facets ``own``) moves, or ``None`` if it
     stays; ``end_of``: where ``v`` is on the open border, its neighbours
-    along crease edges (:func:`_crease_end`), else ``None``; ``noise``: a
-    plane's residual the points' noise accounts for."""
+    along crease edges (:func:`_crease_end`), else ``None``; ``noise``: the
+    points' standard deviation about their surface."""
     ring = np.setdiff1d(triangles[own], [v])
     lengths = np.linalg.norm(vertices[ring] - vertices[v], axis=1)
     if not len(lengths) or not lengths.min() > 0:
@@ -190,7 +190,7 @@ def _target(v, own, vertices, triangles, normal, points, tree, min_cos, sharp,
         return None
     # One sharp edge is weaker evidence of a crease than two: on coarse
     # complexes a plane fitted across two faces tilts and moves the end far.
-    if np.any(tolerance / TRIM > max(THIN * reach, noise)) and (
+    if np.any(tolerance / TRIM > max(THIN * reach, NOISE_MARGIN * noise)) and (
             fit.pruned or (end_of is not None and len(end_of) == 1)):
         return None
     if len(n) == 2:  # the nearest point of the line n x = c
@@ -198,7 +198,8 @@ def _target(v, own, vertices, triangles, normal, points, tree, min_cos, sharp,
     else:
         target = np.linalg.solve(n, c)
     if end_of is not None and len(n) == 2:
-        target = _crease_end(target, n, vertices[end_of], vertices[triangles[own]].mean(axis=(0, 1)), near, reach)
+        target = _crease_end(target, n, vertices[end_of], vertices[triangles[own]].mean(axis=(0, 1)), near, reach,
+                             noise)
     if np.linalg.norm(target - vertices[v]) > reach / 2 or _gap(planes, near, target) > GAP * reach:
         return None
     if _least_sharpness(planes, near, target) <= sharp:
@@ -206,11 +207,12 @@ def _target(v, own, vertices, triangles, normal, points, tree, min_cos, sharp,
     return target
 
 
-def _crease_end(target, normals, neighbours, centre, near, reach) -> np.ndarray:
+def _crease_end(target, normals, neighbours, centre, near, reach, noise: float = 0.0) -> np.ndarray:
     """``target``, on the line of the planes ``normals (2, 3)``, slid along
     it away from ``centre`` (of the vertex's facets) to where the points
     ``near`` within :data:`TUBE` ``* reach`` of the line end
-    (:func:`~otjax.surfaces.fit_input.uniform_end`): a border vertex
+    (:func:`~otjax.surfaces.fit_input.uniform_end`, with the points'
+    standard deviation ``noise``): a border vertex
     ending its crease goes where the crease of the points ends.
     Only where its crease neighbours ``(k, 3)`` within :data:`GAP` ``*
     reach`` of the line all lie behind it, and one does: the complex's
@@ -235,7 +237,7 @@ def _crease_end(target, normals, neighbours, centre, near, reach) -> np.ndarray:
     tube = off <= TUBE * reach
     if tube.sum() < MIN_POINTS:
         return target
-    step = uniform_end(a[tube])
+    step = uniform_end(a[tube], noise)
     return target + step * line if abs(step) <= reach / 2 else target
 
 

@@ -130,6 +130,25 @@ def test_a_vertex_moves_inward_by_at_most_half_its_edge(inside, moves):
         np.testing.assert_array_equal(fit.vertices[3], v[3])
 
 
+def test_side_vertices_end_at_the_border_of_noisy_points():
+    # Gaussian noise of sigma = 0.01 in every direction spreads the points past the square's sides:
+    # the farthest of a strip stands about two sigmas out. The side vertices (not the corners) land
+    # on the true border on average, to within half a sigma, and no farther than two sigmas off.
+    rng = np.random.default_rng(5)
+    k, margin, sigma, n = 5, 0.05, 0.01, 20000
+    vertices, triangles = grid_square(k, margin)
+    points = np.c_[rng.random((n, 2)), np.zeros(n)] + sigma * rng.normal(size=(n, 3))
+    fit = fit_border(vertices, triangles, points)
+    i, j = np.divmod(np.arange(k * k), k)
+    side = ((i == 0) | (i == k - 1)) ^ ((j == 0) | (j == k - 1))
+    moved = fit.vertices[side]
+    # Distance past the nearest side of the unit square (negative: inside).
+    past = np.where(i[side] == 0, -moved[:, 0], np.where(i[side] == k - 1, moved[:, 0] - 1,
+                    np.where(j[side] == 0, -moved[:, 1], moved[:, 1] - 1)))
+    assert abs(past.mean()) < sigma / 2
+    assert np.abs(past).max() < 2 * sigma
+
+
 def test_nothing_moves_without_triangles_or_points():
     v, t = grid_square(3, 0.1)
     assert fit_border(v, t, np.zeros((0, 3))).moved.size == 0
