@@ -8,7 +8,9 @@ of the diagonal at a few thousand points
 each *flat* border vertex (its facets' planes within ``flat_angle`` of one
 another) within that plane, straight across its border, to where the
 points of a strip beside it end: past the farthest by their mean spacing,
-as the last of a uniform sample falls short of its end by about that.
+as the last of a uniform sample falls short of its end by about that. At
+a convex corner of the border each of the vertex's two border edges moves
+out so, and the vertex to where the two lines meet.
 Vertices on creases and where a border meets a crease are left where they
 are. The farthest point decides: give the points without their outliers.
 
@@ -37,8 +39,13 @@ from otjax.surfaces.fit_input import (VertexFit, checked, uniform_end, unit_norm
 FLAT_ANGLE = 45.0
 #: Fewest points in a vertex's strip for it to move.
 MIN_POINTS = 5
-#: A ball around a vertex holding its whole strip: |(1/2, 1/10, 1)| < 1.13.
-STRIP_RADIUS = 1.13
+#: A ball around a vertex holding its whole strip (a side's: |(1/2, 1/10, 1)|,
+#: a corner edge's: |(1, 1/10, 1)| < 1.42).
+STRIP_RADIUS = 1.42
+#: A flat border vertex of two border edges less than this many degrees apart,
+#: its facets between them, is a corner: each edge moves out to its points'
+#: end and the vertex to where they meet (docs/decisions.md#border_fit).
+CORNER_ANGLE = 135.0
 
 
 #: What :func:`fit_border` returns: the positions after the fit and the rows that moved.
@@ -61,6 +68,13 @@ def fit_border(vertices, triangles, points, flat_angle: float = FLAT_ANGLE) -> B
     their mean spacing, or the quantile that stands for it in the points'
     noise, :func:`~otjax.background.flat_noise`; outward, or inward where the points end before it,
     but by at most ``L / 2``: the vertex stays where they end further in).
+    A vertex of exactly two border edges less than :data:`CORNER_ANGLE`
+    apart in that plane, its facets' centre between them, is a corner:
+    each edge moves out across itself to where the points of the strip
+    beside it end (``L/4 <= (p - v).e <= L`` along it, ``e`` its
+    direction; ``|(p - v).N| <= L/10``; within ``L`` across) and the
+    vertex to where the two lines meet, if that is at most ``L / 2`` away
+    (else, or where a strip has too few points, it moves as a side vertex).
     Moves that would flatten a triangle are undone
     (:func:`~otjax.surfaces.fit_input.without_flattening`).
 
@@ -142,6 +156,10 @@ def _step(v, neighbours, vertices, triangles, normal, facets, points, tree, cos_
         across = -across
     reach = min(np.linalg.norm(vertices[u] - vertices[v]), np.linalg.norm(vertices[w] - vertices[v]))
     d = points[tree.query_ball_point(vertices[v], STRIP_RADIUS * reach)] - vertices[v]
+    if len(neighbours) == 2:
+        step = _corner_step(vertices[[u, w]] - vertices[v], axis, centre - vertices[v], d, reach, noise)
+        if step is not None:
+            return step
     t, h, o = d @ along, d @ axis, d @ across
     strip = (np.abs(t) <= reach / 2) & (np.abs(h) <= reach / 10) & (np.abs(o) <= reach)
     if strip.sum() < MIN_POINTS:
@@ -151,6 +169,36 @@ def _step(v, neighbours, vertices, triangles, normal, facets, points, tree, cos_
     # folded away) the strip lies across the shape.
     end = uniform_end(o[strip], noise)
     return end * across if end >= -reach / 2 else None
+
+
+def _corner_step(edges: np.ndarray, axis: np.ndarray, inside: np.ndarray, d: np.ndarray, reach: float,
+                 noise: float) -> np.ndarray | None:
+    """The move of a vertex at a convex corner of the border: its two border
+    edges ``(2, 3)`` (from the vertex), in the plane across ``axis``, less
+    than :data:`CORNER_ANGLE` apart with its facets' centre ``inside``
+    between them. Each edge moves out across itself to where the points
+    ``d (n, 3)`` (from the vertex) of a strip beside it end, and the vertex
+    to where the two lines meet. ``None`` where the vertex is no such
+    corner, a strip holds fewer than :data:`MIN_POINTS` points or the move
+    exceeds ``reach / 2``."""
+    dirs = edges - np.outer(edges @ axis, axis)
+    dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
+    if dirs[0] @ dirs[1] <= np.cos(np.radians(CORNER_ANGLE)) or inside @ (dirs[0] + dirs[1]) <= 0:
+        return None
+    ends = []
+    for i in (0, 1):
+        across = np.cross(axis, dirs[i])
+        if across @ dirs[1 - i] > 0:  # away from the other edge: out of the corner
+            across = -across
+        t, h, o = d @ dirs[i], d @ axis, d @ across
+        strip = (t >= reach / 4) & (t <= reach) & (np.abs(h) <= reach / 10) & (np.abs(o) <= reach)
+        if strip.sum() < MIN_POINTS:
+            return None
+        ends.append((across, uniform_end(o[strip], noise)))
+    # x = a dirs[0] + b dirs[1] with x . across_i = end_i; dirs[i] . across_i = 0.
+    (c0, e0), (c1, e1) = ends
+    step = e1 / (dirs[0] @ c1) * dirs[0] + e0 / (dirs[1] @ c0) * dirs[1]
+    return step if np.linalg.norm(step) <= reach / 2 else None
 
 
 def _straightest(v: int, neighbours: list[int], vertices: np.ndarray) -> tuple[int, int]:

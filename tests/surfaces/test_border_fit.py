@@ -22,26 +22,37 @@ def grid_square(k: int, margin: float):
     return vertices, np.array(tri)
 
 
+def _strip_end(d, along, across, t_range, step):
+    """Past the farthest of the points ``d`` (from the vertex) in the strip
+    ``t_range`` along, a tenth of ``step`` off the plane and ``step`` across,
+    by their mean spacing, across."""
+    t, h, o = d @ along, d[:, 2], d @ across
+    strip = (t >= t_range[0]) & (t <= t_range[1]) & (np.abs(h) <= step / 10) & (np.abs(o) <= step)
+    assert strip.sum() >= 5  # premise: every border vertex moves
+    return o[strip].max() + np.ptp(o[strip]) / (strip.sum() - 1)
+
+
 def expected_square(vertices, points, k, margin):
-    """The rule in the square's frame: border vertices move across their
-    border (corners along the diagonal) to where the strip's points end:
-    past the farthest by their mean spacing."""
+    """The rule in the square's frame: a side vertex moves across its border
+    to where the points of the strip beside it end: past the farthest by
+    their mean spacing; at a corner each border edge moves out across
+    itself to where the points of a strip beside it end, and the corner to
+    where the two lines meet."""
     out = vertices.copy()
     step = (1 - 2 * margin) / (k - 1)
+    x, y = np.eye(3)[0], np.eye(3)[1]
     for v in range(k * k):
         i, j = divmod(v, k)
         side_x = -1 if i == 0 else 1 if i == k - 1 else 0
         side_y = -1 if j == 0 else 1 if j == k - 1 else 0
-        if side_x == side_y == 0:
-            continue
-        across = np.array([side_x, side_y, 0.0])
-        across /= np.linalg.norm(across)
-        along = np.array([-across[1], across[0], 0.0])
         d = points - vertices[v]
-        t, h, o = d @ along, d[:, 2], d @ across
-        strip = (np.abs(t) <= step / 2) & (np.abs(h) <= step / 10) & (np.abs(o) <= step)
-        assert strip.sum() >= 5  # premise: every border vertex moves
-        out[v] = vertices[v] + (o[strip].max() + np.ptp(o[strip]) / (strip.sum() - 1)) * across
+        if side_x and side_y:  # the edge along y moves out along x, the edge along x along y
+            out[v] = (vertices[v] + _strip_end(d, -side_y * y, side_x * x, (step / 4, step), step) * side_x * x
+                      + _strip_end(d, -side_x * x, side_y * y, (step / 4, step), step) * side_y * y)
+        elif side_x or side_y:
+            across = side_x * x + side_y * y
+            along = np.array([-across[1], across[0], 0.0])
+            out[v] = vertices[v] + _strip_end(d, along, across, (-step / 2, step / 2), step) * across
     return out
 
 
