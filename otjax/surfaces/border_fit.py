@@ -46,6 +46,8 @@ STRIP_RADIUS = 1.42
 #: its facets between them, is a corner: each edge moves out to its points'
 #: end and the vertex to where they meet (docs/decisions.md#border_fit).
 CORNER_ANGLE = 135.0
+#: A corner's facets are flat within this many degrees (docs/decisions.md#border_fit).
+CORNER_FLAT_ANGLE = 20.0
 
 
 #: What :func:`fit_border` returns: the positions after the fit and the rows that moved.
@@ -69,12 +71,14 @@ def fit_border(vertices, triangles, points, flat_angle: float = FLAT_ANGLE) -> B
     noise, :func:`~otjax.background.flat_noise`; outward, or inward where the points end before it,
     but by at most ``L / 2``: the vertex stays where they end further in).
     A vertex of exactly two border edges less than :data:`CORNER_ANGLE`
-    apart in that plane, its facets' centre between them, is a corner:
+    apart in that plane, its facets' centre between them and their normals
+    within :data:`CORNER_FLAT_ANGLE` of one another, is a corner:
     each edge moves out across itself to where the points of the strip
     beside it end (``L/4 <= (p - v).e <= L`` along it, ``e`` its
     direction; ``|(p - v).N| <= L/10``; within ``L`` across) and the
     vertex to where the two lines meet, if that is at most ``L / 2`` away
-    (else, or where a strip has too few points, it moves as a side vertex).
+    and has a point within ``L / 4`` (else, or where a strip has too few
+    points, it moves as a side vertex).
     Moves that would flatten a triangle are undone
     (:func:`~otjax.surfaces.fit_input.without_flattening`).
 
@@ -156,7 +160,7 @@ def _step(v, neighbours, vertices, triangles, normal, facets, points, tree, cos_
         across = -across
     reach = min(np.linalg.norm(vertices[u] - vertices[v]), np.linalg.norm(vertices[w] - vertices[v]))
     d = points[tree.query_ball_point(vertices[v], STRIP_RADIUS * reach)] - vertices[v]
-    if len(neighbours) == 2:
+    if len(neighbours) == 2 and np.all(n @ n.T >= np.cos(np.radians(CORNER_FLAT_ANGLE))):
         step = _corner_step(vertices[[u, w]] - vertices[v], axis, centre - vertices[v], d, reach, noise)
         if step is not None:
             return step
@@ -179,8 +183,9 @@ def _corner_step(edges: np.ndarray, axis: np.ndarray, inside: np.ndarray, d: np.
     between them. Each edge moves out across itself to where the points
     ``d (n, 3)`` (from the vertex) of a strip beside it end, and the vertex
     to where the two lines meet. ``None`` where the vertex is no such
-    corner, a strip holds fewer than :data:`MIN_POINTS` points or the move
-    exceeds ``reach / 2``."""
+    corner, a strip holds fewer than :data:`MIN_POINTS` points, the move
+    exceeds ``reach / 2`` or no point lies within ``reach / 4`` of where
+    it ends."""
     dirs = edges - np.outer(edges @ axis, axis)
     dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
     if dirs[0] @ dirs[1] <= np.cos(np.radians(CORNER_ANGLE)) or inside @ (dirs[0] + dirs[1]) <= 0:
@@ -198,7 +203,11 @@ def _corner_step(edges: np.ndarray, axis: np.ndarray, inside: np.ndarray, d: np.
     # x = a dirs[0] + b dirs[1] with x . across_i = end_i; dirs[i] . across_i = 0.
     (c0, e0), (c1, e1) = ends
     step = e1 / (dirs[0] @ c1) * dirs[0] + e0 / (dirs[1] @ c0) * dirs[1]
-    return step if np.linalg.norm(step) <= reach / 2 else None
+    # Where the two edges are no borders of the points (a fold covers the
+    # true border beyond them) the lines meet out past the points.
+    if np.linalg.norm(step) > reach / 2 or np.linalg.norm(d - step, axis=1).min() > reach / 4:
+        return None
+    return step
 
 
 def _straightest(v: int, neighbours: list[int], vertices: np.ndarray) -> tuple[int, int]:

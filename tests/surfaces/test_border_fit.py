@@ -37,7 +37,8 @@ def expected_square(vertices, points, k, margin):
     to where the points of the strip beside it end: past the farthest by
     their mean spacing; at a corner each border edge moves out across
     itself to where the points of a strip beside it end, and the corner to
-    where the two lines meet."""
+    where the two lines meet, if a point lies within a quarter step of
+    there; else it moves as a side vertex, along the diagonal."""
     out = vertices.copy()
     step = (1 - 2 * margin) / (k - 1)
     x, y = np.eye(3)[0], np.eye(3)[1]
@@ -47,10 +48,13 @@ def expected_square(vertices, points, k, margin):
         side_y = -1 if j == 0 else 1 if j == k - 1 else 0
         d = points - vertices[v]
         if side_x and side_y:  # the edge along y moves out along x, the edge along x along y
-            out[v] = (vertices[v] + _strip_end(d, -side_y * y, side_x * x, (step / 4, step), step) * side_x * x
-                      + _strip_end(d, -side_x * x, side_y * y, (step / 4, step), step) * side_y * y)
-        elif side_x or side_y:
-            across = side_x * x + side_y * y
+            move = (_strip_end(d, -side_y * y, side_x * x, (step / 4, step), step) * side_x * x
+                    + _strip_end(d, -side_x * x, side_y * y, (step / 4, step), step) * side_y * y)
+            if np.linalg.norm(d - move, axis=1).min() <= step / 4:
+                out[v] = vertices[v] + move
+                continue
+        if side_x or side_y:
+            across = (side_x * x + side_y * y) / np.hypot(side_x, side_y)
             along = np.array([-across[1], across[0], 0.0])
             out[v] = vertices[v] + _strip_end(d, along, across, (-step / 2, step / 2), step) * across
     return out
