@@ -58,8 +58,10 @@ class SurfaceReconstruction(NamedTuple):
     Attributes:
       vertices: ``(V, 3)`` float64 live vertex positions.
       triangles: ``(T, 3)`` int64 rows into ``vertices``.
-      edges: ``(E, 2)`` int64 rows into ``vertices``: the edges in no triangle.
-      isolated: ``(I,)`` int64 rows of vertices in no edge that carry mass.
+      edges: ``(0, 2)`` int64: edges carry no mass (the transport has facet
+        and vertex bins only), so the complex's edges of no triangle, chords
+        left by collapses, are no part of the surface (``complex`` has them).
+      isolated: ``(I,)`` int64 rows of vertices in no triangle that carry mass.
       triangle_mass: ``(T,)`` float64 mass transported onto each triangle.
       triangle_area: ``(T,)`` float64 area of each triangle.
       total_cost: the plan's transport cost (mass times squared length);
@@ -331,11 +333,12 @@ def _result(plan: SurfacePlan, frame, stats: DecimationStats, seconds: dict) -> 
     arrays = c.to_arrays()
     keys = [tuple(int(x) for x in arrays.vertex_ids[t]) for t in arrays.triangles]
     tri_mass = np.array([plan.simplex_mass(k) for k in keys])
-    carried = np.array([plan.simplex_mass(int(arrays.vertex_ids[i])) > 0 for i in arrays.isolated], bool)
+    loose = np.setdiff1d(np.arange(len(arrays.vertices)), arrays.triangles)  # isolated or on dangling edges
+    carried = np.array([plan.simplex_mass(int(arrays.vertex_ids[i])) > 0 for i in loose], bool)
     vertices = frame.points_out(arrays.vertices)
     cost, exponent = frame.cost_out(plan.total_cost())
     return SurfaceReconstruction(
-        vertices=vertices, triangles=arrays.triangles, edges=arrays.edges[arrays.dangling],
-        isolated=arrays.isolated[carried], triangle_mass=frame.masses_out(tri_mass),
+        vertices=vertices, triangles=arrays.triangles, edges=np.zeros((0, 2), np.int64),
+        isolated=loose[carried].astype(np.int64), triangle_mass=frame.masses_out(tri_mass),
         triangle_area=facet_areas(vertices, arrays.triangles), total_cost=cost, cost_exponent=exponent,
         plan=plan, complex=c, vertex_ids=arrays.vertex_ids, stats=stats, seconds=seconds)

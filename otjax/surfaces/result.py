@@ -41,7 +41,8 @@ class SurfaceResult:
     Attributes:
       vertices: ``(V, 3)`` float64 positions.
       triangles: ``(T, 3)`` int64 facets, rows into ``vertices``.
-      edges: ``(E, 2)`` int64 dangling edges (of no facet).
+      edges: ``(E, 2)`` int64 dangling edges (of no facet); a reconstruction
+        has none, since edges carry no transported mass.
       isolated: ``(I,)`` int64 vertices of no facet or edge that carry mass.
       triangle_mass: ``(T,)`` mass transported onto each facet, ``>= 0``.
       vertex_mass: ``(V,)`` mass transported onto each vertex (``>= 0``), or

@@ -169,6 +169,24 @@ def test_relocation_lowers_the_final_cost_on_the_noisy_staircase(noisy_staircase
     assert gap(fixed.vertices).max() < 1e-12 and gap(moved.vertices).max() > 1e-3
 
 
+def test_edges_of_no_triangle_are_left_out_and_their_vertices_with_mass_are_isolated(noisy_staircase_runs):
+    """Edges carry no mass (no edge bins): the complex's edges of no triangle
+    are not in the result, and each vertex of no triangle that carries mass
+    is an isolated vertex of it, whether on such an edge or on none."""
+    _, *runs = noisy_staircase_runs
+    dangling = 0
+    for r in runs:
+        arrays = r.complex.to_arrays()
+        dangling += int(arrays.dangling.sum())
+        on_triangles = set(r.triangles.ravel().tolist())
+        carrying = {row for row, v in enumerate(r.vertex_ids) if r.plan.simplex_mass(int(v)) > 0}
+        assert r.edges.shape == (0, 2)
+        assert set(r.isolated.tolist()) == carrying - on_triangles
+        on_dangling = set(arrays.edges[arrays.dangling].ravel().tolist()) - on_triangles
+        assert on_dangling & carrying <= set(r.isolated.tolist())
+    assert dangling > 0  # the premise: the decimation leaves edges of no triangle
+
+
 def test_background_noise_is_discounted_and_clean_input_left_as_it_is():
     rng = np.random.default_rng(0)
     square = SQUARE.sample(400, rng)
