@@ -47,7 +47,7 @@ def _outputs(p: argparse.ArgumentParser) -> None:
 def add_surface_parsers(sub) -> None:
     """Adds ``surface`` and ``recover`` to the ``otjax`` subcommands."""
     p = sub.add_parser("surface", help="reconstruct a 3D surface from points",
-                       description="Reconstruct a surface (triangles, edges, isolated vertices) from 3D points by "
+                       description="Reconstruct a surface (triangles and isolated vertices) from 3D points by "
                        "optimal transport (Digne et al. 2014). Inputs: .xyz/.csv/.txt (x y z [...] per line) or "
                        ".ply point sets.")
     source = p.add_mutually_exclusive_group()
@@ -145,7 +145,8 @@ def _finish(result, args, outputs, filtered: bool = False) -> int:
         result = result.filtered(args.density_threshold)
     write_files([(path, result.render(path)) for path in outputs], mkdir=args.mkdir)
     if not args.quiet:
-        print(f"{len(result.vertices)} vertices, {len(result.triangles)} triangles, {len(result.edges)} edges, "
+        edges = f"{len(result.edges)} edges, " if len(result.edges) else ""
+        print(f"{len(result.vertices)} vertices, {len(result.triangles)} triangles, {edges}"
               f"{len(result.isolated)} isolated; transport cost {result.total_cost:.6g}")
         for path in outputs:
             print(f"wrote {path}")
