@@ -190,8 +190,10 @@ def _local_flats(points: np.ndarray, weights: np.ndarray, neighbours: int) -> _L
 def _near_a_neighbours_flat(points: np.ndarray, weights: np.ndarray, idx: np.ndarray, which: np.ndarray,
                             sigmas: float, floor_scale: float) -> np.ndarray:
     """For the points ``which (m,)``: whether at least :data:`SUPPORTING_FLATS`
-    of their neighbours' flats, each refitted without the point itself, pass
-    within ``sigmas`` of that neighbour's residual scale of it: ``(m,) bool``."""
+    of their neighbours' flats, each refitted without the point itself and
+    thin (its median residual within :data:`THIN` ``* floor_scale``), pass
+    within ``sigmas`` scales of it (``floor_scale``, the median residual,
+    as a standard deviation): ``(m,) bool``."""
     m, k = len(which), idx.shape[1]
     nbr = idx[which]  # (m, k)
     hood = idx[nbr]  # (m, k, k): each neighbour's own neighbours
@@ -255,7 +257,8 @@ def near_shape(points: np.ndarray, weights: np.ndarray, neighbours: int = NEIGHB
     centre, normal, local, idx = _local_flats(points, weights, neighbours)
     # The floor: on exact flats every residual is a rounding error.
     floor = max(float(np.median(local[weights > 0])), 1e-9 * float(np.linalg.norm(np.ptp(points, axis=0))))
-    near = np.abs(np.einsum("nd,nd->n", points - centre, normal)) <= sigmas * _MAD_TO_SIGMA * np.maximum(local, floor)
+    gap = np.abs(np.einsum("nd,nd->n", points - centre, normal))
+    near = gap <= sigmas * _MAD_TO_SIGMA * np.maximum(local, floor)
     # Second chance where one flat does not fit: a point of a sheet at a
     # crease whose neighbours are mostly on the other sheet, or at a border
     # where they lean to one side, lies on some neighbour's flat.
