@@ -198,8 +198,8 @@ def _target(v, own, vertices, triangles, normal, points, tree, min_cos, sharp,
     else:
         target = np.linalg.solve(n, c)
     if end_of is not None and len(n) == 2:
-        target = _crease_end(target, n, vertices[end_of], vertices[triangles[own]].mean(axis=(0, 1)), near, reach,
-                             noise)
+        centre = vertices[triangles[own]].mean(axis=(0, 1))
+        target = _crease_end(target, n, vertices[end_of], centre, near, reach, noise)
     if np.linalg.norm(target - vertices[v]) > reach / 2 or _gap(planes, near, target) > GAP * reach:
         return None
     if _least_sharpness(planes, near, target) <= sharp:
