@@ -29,10 +29,9 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import cKDTree
 
-from otjax.background import NOISE_NEIGHBOURS, flat_noise
 from otjax.metrics3d import boundary_edges
-from otjax.surfaces.fit_input import (VertexFit, checked, uniform_end, unit_normals, vertex_facets,
-                                      without_flattening)
+from otjax.surfaces.fit_input import (VertexFit, checked, points_noise, uniform_end, unit_normals,
+                                      vertex_facets, without_flattening)
 
 #: Largest angle, in degrees, between two facets of a vertex that still
 #: counts as flat (docs/decisions.md#border_fit).
@@ -54,7 +53,8 @@ CORNER_FLAT_ANGLE = 20.0
 BorderFit = VertexFit
 
 
-def fit_border(vertices, triangles, points, flat_angle: float = FLAT_ANGLE) -> BorderFit:
+def fit_border(vertices, triangles, points, flat_angle: float = FLAT_ANGLE,
+               noise: float | None = None) -> BorderFit:
     """Moves the flat border vertices of a complex out to the end of the points.
 
     For a border vertex ``v`` with at least two border neighbours (the
@@ -68,8 +68,8 @@ def fit_border(vertices, triangles, points, flat_angle: float = FLAT_ANGLE) -> B
     moves along ``out`` to where their ``(p - v).out`` end
     (:func:`~otjax.surfaces.fit_input.uniform_end`: past the largest by
     their mean spacing, or the quantile that stands for it in the points'
-    noise, :func:`~otjax.background.flat_noise`; outward, or inward where the points end before it,
-    but by at most ``L / 2``: the vertex stays where they end further in).
+    ``noise``; outward, or inward where the points end before it, but by
+    at most ``L / 2``: the vertex stays where they end further in).
     A vertex of exactly two border edges less than :data:`CORNER_ANGLE`
     apart in that plane, its facets' centre between them and their normals
     within :data:`CORNER_FLAT_ANGLE` of one another, is a corner:
@@ -88,6 +88,8 @@ def fit_border(vertices, triangles, points, flat_angle: float = FLAT_ANGLE) -> B
       points: ``(n, 3)`` the points the complex was reconstructed from
         (without outliers: the farthest point of a strip decides).
       flat_angle: degrees, in ``(0, 90)``.
+      noise: the points' standard deviation about their surface, if known
+        (else :func:`~otjax.background.flat_noise` of ``points``).
 
     Returns:
       :class:`BorderFit`.
@@ -122,7 +124,7 @@ def fit_border(vertices, triangles, points, flat_angle: float = FLAT_ANGLE) -> B
     facets = vertex_facets(triangles)
     cos_flat = np.cos(np.radians(flat_angle))
     tree = cKDTree(points)
-    noise = flat_noise(points) if len(points) > NOISE_NEIGHBOURS else 0.0
+    noise = points_noise(points, noise)
     moved = []
     for v in sorted(neighbours):
         step = _step(v, neighbours[v], vertices, triangles, normal, facets.get(v, []), points, tree, cos_flat,

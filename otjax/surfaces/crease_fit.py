@@ -34,10 +34,9 @@ from typing import NamedTuple
 import numpy as np
 from scipy.spatial import cKDTree
 
-from otjax.background import NOISE_NEIGHBOURS, flat_noise
 from otjax.metrics3d import edge_sharpness
-from otjax.surfaces.fit_input import (VertexFit, checked, uniform_end, unit_normals, vertex_facets,
-                                      without_flattening)
+from otjax.surfaces.fit_input import (VertexFit, checked, points_noise, uniform_end, unit_normals,
+                                      vertex_facets, without_flattening)
 
 #: Dihedral sharpness, in degrees, above which an edge is a crease
 #: (docs/decisions.md#feature_fit).
@@ -94,7 +93,8 @@ class _Planes(NamedTuple):
     tolerance: np.ndarray
 
 
-def fit_creases(vertices, triangles, points, sharp_angle: float = SHARP_ANGLE) -> CreaseFit:
+def fit_creases(vertices, triangles, points, sharp_angle: float = SHARP_ANGLE,
+                noise: float | None = None) -> CreaseFit:
     """Moves the crease vertices of a complex onto the planes of the points.
 
     A vertex on at least two edges sharper than ``sharp_angle`` (edges of
@@ -130,6 +130,8 @@ def fit_creases(vertices, triangles, points, sharp_angle: float = SHARP_ANGLE) -
       triangles: ``(T, 3)`` int rows into ``vertices``.
       points: ``(n, 3)`` the points the complex was reconstructed from.
       sharp_angle: degrees, in ``(0, 90)``.
+      noise: the points' standard deviation about their surface, if known
+        (else :func:`~otjax.background.flat_noise` of ``points``).
 
     Returns:
       :class:`CreaseFit`.
@@ -157,7 +159,7 @@ def fit_creases(vertices, triangles, points, sharp_angle: float = SHARP_ANGLE) -
     facets = vertex_facets(triangles)
     tree = cKDTree(points)
     min_cos = np.cos(np.radians(PLANE_ANGLE))
-    noise = flat_noise(points) if len(points) > NOISE_NEIGHBOURS else 0.0
+    noise = points_noise(points, noise)
     moved = []
     for v in np.flatnonzero((count >= 2) | ((count == 1) & border)).tolist():
         own = np.array([f for f in facets[v] if np.any(normal[f])], np.int64)
@@ -188,8 +190,9 @@ def _target(v, own, vertices, triangles, normal, points, tree, min_cos, sharp,
     n, c, tolerance = planes
     if np.any(np.abs(n @ n.T)[np.triu_indices(len(n), 1)] > min_cos):
         return None
-    # One sharp edge is weaker evidence of a crease than two: on coarse
-    # complexes a plane fitted across two faces tilts and moves the end far.
+    # One sharp edge is weaker evidence of a crease than two, and planes left
+    # after pruning may be a bevel: a plane fitted across two faces tilts and
+    # moves the vertex far, so both need thin planes.
     if np.any(tolerance / TRIM > max(THIN * reach, NOISE_MARGIN * noise)) and (
             fit.pruned or (end_of is not None and len(end_of) == 1)):
         return None
@@ -306,6 +309,8 @@ def _without_redundant(planes: _Planes, near: np.ndarray) -> _Planes:
     a plane across a crease (the points along it) or across the open
     border (the points along the border) takes points that are other
     planes' own."""
+    if len(planes.normal) < 3:
+        return planes
     nearest, within = _members(planes, near)
     dist = np.abs(near @ planes.normal.T - planes.offset)  # (n, k)
     share = np.zeros(len(planes.normal))
@@ -313,7 +318,7 @@ def _without_redundant(planes: _Planes, near: np.ndarray) -> _Planes:
         own = within & (nearest == g)
         if own.any():
             share[g] = (np.delete(dist[own], g, axis=1) < planes.tolerance[g]).any(axis=1).mean()
-    if len(planes.normal) < 3 or share.max() <= REDUNDANT:
+    if share.max() <= REDUNDANT:
         return planes
     keep = np.arange(len(planes.normal)) != share.argmax()
     return _Planes(*(x[keep] for x in planes))

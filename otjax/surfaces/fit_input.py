@@ -10,6 +10,8 @@ from typing import NamedTuple
 
 import numpy as np
 
+from otjax.background import NOISE_NEIGHBOURS, flat_noise
+
 from otjax.surfaces.relocation import MIN_ASPECT, aspect
 from otjax.surfaces.star_plan import face_normals
 
@@ -75,6 +77,14 @@ def uniform_end(x: np.ndarray, noise: float = 0.0) -> float:
     spread = float(np.ptp(x))
     share = min(noise / (math.sqrt(2 * math.pi) * spread), 0.5) if noise > 0 and spread > 0 else 0.0
     return float(np.quantile(x, 1.0 - share) + spread / (len(x) - 1))
+
+
+def points_noise(points: np.ndarray, noise: float | None = None) -> float:
+    """``noise`` if given, else the points' standard deviation about their
+    surface (:func:`otjax.background.flat_noise`; 0 for too few points)."""
+    if noise is not None:
+        return float(noise)
+    return flat_noise(points) if len(points) > NOISE_NEIGHBOURS else 0.0
 
 
 class VertexFit(NamedTuple):

@@ -27,6 +27,7 @@ from otjax.surfaces.border_fit import fit_border
 from otjax.surfaces.complex import SimplicialComplex
 from otjax.surfaces.crease_fit import fit_creases
 from otjax.surfaces.engine import SurfaceEngine
+from otjax.surfaces.fit_input import points_noise
 from otjax.surfaces.initial_complex import FRACTION, initial_complex, initial_settings
 from otjax.surfaces.plan import BinSettings, Entries, SurfacePlan
 from otjax.surfaces.relaxation import relax
@@ -270,8 +271,9 @@ def _fit_features(plan: SurfacePlan, points: np.ndarray, fit: bool, method: str)
     if not fit:
         return 0
     arrays = plan.complex.to_arrays()
-    fitted = fit_creases(arrays.vertices, arrays.triangles, points).vertices
-    fitted = fit_border(fitted, arrays.triangles, points).vertices
+    noise = points_noise(points)  # one estimate for both fits
+    fitted = fit_creases(arrays.vertices, arrays.triangles, points, noise=noise).vertices
+    fitted = fit_border(fitted, arrays.triangles, points, noise=noise).vertices
     moved = np.flatnonzero(np.any(fitted != arrays.vertices, axis=1))
     for row in moved.tolist():
         plan.complex.move(int(arrays.vertex_ids[row]), fitted[row])
