@@ -263,5 +263,6 @@ def near_shape(points: np.ndarray, weights: np.ndarray, neighbours: int = NEIGHB
     # crease whose neighbours are mostly on the other sheet, or at a border
     # where they lean to one side, lies on some neighbour's flat.
     off = np.flatnonzero(~near)
-    near[off] = _near_a_neighbours_flat(points, weights, idx, off, sigmas, floor)
+    if len(off):
+        near[off] = _near_a_neighbours_flat(points, weights, idx, off, sigmas, floor)
     return near

@@ -142,6 +142,14 @@ def test_near_shape_drops_points_off_a_folded_sheet_and_keeps_the_sheet(seed, no
     assert not near[n:].any(), f"{int(near[n:].sum())} off-sheet points kept"
 
 
+@pytest.mark.parametrize("dim", [2, 3])
+def test_near_shape_keeps_every_point_of_an_exact_flat(dim):
+    """No point off any flat: every point stays (nothing left for the second chance)."""
+    rng = np.random.default_rng(dim)
+    points = np.c_[rng.random((400, dim - 1)), np.zeros(400)]
+    assert near_shape(points, np.ones(400)).all()
+
+
 def test_near_shape_in_2d_keeps_a_noisy_line_and_drops_points_off_it():
     rng = np.random.default_rng(3)
     line = np.c_[rng.uniform(0, 1, 800), 0.002 * rng.standard_normal(800)]
