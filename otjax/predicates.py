@@ -23,21 +23,45 @@ import numpy as np
 _EPS = np.finfo(np.float64).eps / 2
 ORIENT_ERR = (3.0 + 16.0 * _EPS) * _EPS
 # Orientations the float filter leaves unsure, up to this many in a call,
-# are settled one at a time (~2 us each); more go to the vectorised
-# expansions, which cost ~0.2 ms a call however few rows they get. On
-# exactly collinear input (a clean 3k-point star) 84% of the host location
-# calls leave at most 128 (docs/decisions.md#scalar_unsure).
+# are settled one at a time (~1 us each); more go to the vectorised path.
+# There the rows the product comparison leaves are split by the same bound
+# between the integer path (~2.3 us a row) and the expansions (~0.25 ms a
+# call) (docs/decisions.md#scalar_unsure).
 SCALAR_UNSURE = 96
 
 
+def _subtracts_exactly(x, y, d) -> bool:
+    """Whether ``d = fl(x - y)`` is exact: Knuth's two-sum error of ``x + (-y)`` is zero."""
+    bb = d - x
+    return (x - (d - bb)) + (-y - bb) == 0
+
+
 def _exact_orient(ax, ay, bx, by, cx, cy) -> int:
+    """Exact orientation sign of one triangle (six floats): products, else integers."""
+    u, v, w, z = bx - ax, cy - ay, by - ay, cx - ax
+    left, right = u * v, w * z
+    # With the four differences exact, the determinant is left - right before
+    # rounding, and rounding is monotone: distinct rounded products compare
+    # as the exact ones. Near-equal coordinates subtract exactly, so this
+    # settles most orientations the filter leaves to collinear input.
+    if left != right and _subtracts_exactly(bx, ax, u) and _subtracts_exactly(cy, ay, v) \
+            and _subtracts_exactly(by, ay, w) and _subtracts_exactly(cx, ax, z):
+        return 1 if left > right else -1
+    return _exact_orient_integer(ax, ay, bx, by, cx, cy)
+
+
+def _exact_orient_integer(ax, ay, bx, by, cx, cy) -> int:
     # Every double is n / 2^k: over the largest denominator all six are
     # integers, and Python integer arithmetic is exact and ~20x faster than
-    # Fraction (collinear data, e.g. noise-free polygons, needs this path for
-    # almost every point lying on an edge).
-    ratios = [float(v).as_integer_ratio() for v in (ax, ay, bx, by, cx, cy)]
-    den = max(d for _, d in ratios)
-    ax, ay, bx, by, cx, cy = (n * (den // d) for n, d in ratios)
+    # Fraction (collinear data, e.g. noise-free polygons, needs an exact path
+    # for almost every point lying on an edge).
+    # Unrolled: generator overhead was half the cost of a call.
+    (nax, dax), (nay, day) = float(ax).as_integer_ratio(), float(ay).as_integer_ratio()
+    (nbx, dbx), (nby, dby) = float(bx).as_integer_ratio(), float(by).as_integer_ratio()
+    (ncx, dcx), (ncy, dcy) = float(cx).as_integer_ratio(), float(cy).as_integer_ratio()
+    den = max(dax, day, dbx, dby, dcx, dcy)
+    ax, ay, bx, by = nax * (den // dax), nay * (den // day), nbx * (den // dbx), nby * (den // dby)
+    cx, cy = ncx * (den // dcx), ncy * (den // dcy)
     det = (bx - ax) * (cy - ay) - (by - ay) * (cx - ax)
     return (det > 0) - (det < 0)
 
@@ -75,13 +99,42 @@ def _two_product(a, b):
 def _exact_orient_many(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
     """Exact orientation signs of ``(N, 2)`` triangles, vectorised.
 
+    Rows whose four coordinate differences are exact and whose two rounded
+    products differ are decided by comparing those (as in
+    :func:`_exact_orient`: a few operations a row, where the expansion
+    below costs ~100); the others go to :func:`_exact_orient_expansion`,
+    or one at a time to the integer path when at most
+    :data:`SCALAR_UNSURE` are left.
+
+    Returns:
+      ``(N,)`` int8 in ``{-1, 0, +1}``.
+    """
+    ends = ((b[:, 0], a[:, 0]), (c[:, 1], a[:, 1]), (b[:, 1], a[:, 1]), (c[:, 0], a[:, 0]))
+    u, v, w, z = (x - y for x, y in ends)
+    left, right = u * v, w * z
+    quick = left != right
+    for x, y in ends:
+        quick &= _two_sum(x, -y)[1] == 0
+    out = np.where(left > right, 1, -1).astype(np.int8)
+    rest = np.flatnonzero(~quick)
+    if len(rest) > SCALAR_UNSURE:
+        out[rest] = _exact_orient_expansion(a[rest], b[rest], c[rest])
+    elif len(rest):  # fewer than the expansion's fixed cost (~0.3 ms) covers
+        rows = np.concatenate([a[rest], b[rest], c[rest]], axis=1).tolist()
+        out[rest] = [_exact_orient_integer(*r) for r in rows]
+    return out
+
+
+def _exact_orient_expansion(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
+    """Exact orientation signs of ``(N, 2)`` triangles by error-free expansion.
+
     The determinant ``(bx-ax)(cy-ay) - (by-ay)(cx-ax)`` is written exactly
     as a sum of 16 doubles (two-term differences, their pairwise products
     split error-free); repeated VecSum passes (Ogita, Rump and Oishi 2005)
     keep that sum exact while concentrating it in the last term, until the
     last term's magnitude exceeds the others' total and so gives the sign.
     Rows outside the exactness window, or still undecided, go to
-    :func:`_exact_orient`.
+    :func:`_exact_orient_integer`.
     """
     terms = []
     for (p, q, r, t) in ((b[:, 0], a[:, 0], c[:, 1], a[:, 1]), (b[:, 1], a[:, 1], c[:, 0], a[:, 0])):
@@ -116,7 +169,7 @@ def _exact_orient_many(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarra
             out[rows[sure]] = np.sign(last[sure]).astype(np.int8)
             undecided[rows[sure | zero]] = False
     for k in np.flatnonzero(undecided | ~safe):
-        out[k] = _exact_orient(a[k, 0], a[k, 1], b[k, 0], b[k, 1], c[k, 0], c[k, 1])
+        out[k] = _exact_orient_integer(a[k, 0], a[k, 1], b[k, 0], b[k, 1], c[k, 0], c[k, 1])
     return out
 
 
@@ -146,8 +199,8 @@ def orient(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
       ``(...)`` int8: ``+1`` counter-clockwise, ``-1`` clockwise, ``0`` collinear.
 
     Example:
-      >>> orient(np.array([0., 0.]), np.array([1., 0.]), np.array([0., 1.]))
-      array(1, dtype=int8)
+      >>> orient(np.array([[0., 0.]]), np.array([[1., 0.]]), np.array([[0., 1.], [2., 0.]]))
+      array([1, 0], dtype=int8)
     """
     a, b, c = np.broadcast_arrays(*(np.asarray(x, np.float64) for x in (a, b, c)))
     left = (b[..., 0] - a[..., 0]) * (c[..., 1] - a[..., 1])
@@ -197,6 +250,30 @@ def orient_perturbed(a: np.ndarray, b: np.ndarray, p: np.ndarray) -> np.ndarray:
     first = np.sign(a[..., 1] - b[..., 1]).astype(np.int8)  # exact: a comparison
     second = np.sign(b[..., 0] - a[..., 0]).astype(np.int8)
     return np.where(s != 0, s, np.where(first != 0, first, second)).astype(np.int8)
+
+
+def orient_perturbed_scalar(ax: float, ay: float, bx: float, by: float, px: float, py: float) -> int:
+    """:func:`orient_perturbed` of one edge and point given as six Python floats.
+
+    The same predicate without NumPy's per-call overhead, for callers left
+    with a few unsure edges (exactly collinear input leaves many such calls).
+    """
+    s = orient_scalar(ax, ay, bx, by, px, py)
+    if s:
+        return s
+    # The first non-zero of a_y - b_y and b_x - a_x: exact, as comparisons.
+    if ay != by:
+        return 1 if ay > by else -1
+    return 1 if bx > ax else -1 if bx < ax else 0
+
+
+def in_triangle_scalar(x0: float, y0: float, x1: float, y1: float, x2: float, y2: float,
+                       px: float, py: float) -> bool:
+    """:func:`in_triangle_perturbed` of one CCW triangle and point, as Python floats."""
+    # Stops at the first edge not positive: the answer is their conjunction.
+    return (orient_perturbed_scalar(x0, y0, x1, y1, px, py) > 0
+            and orient_perturbed_scalar(x1, y1, x2, y2, px, py) > 0
+            and orient_perturbed_scalar(x2, y2, x0, y0, px, py) > 0)
 
 
 def in_triangle_perturbed(tri: np.ndarray, p: np.ndarray) -> np.ndarray:

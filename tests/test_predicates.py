@@ -14,7 +14,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from otjax import predicates
-from otjax.predicates import orient, orient_scalar
+from otjax.predicates import (in_triangle_perturbed, in_triangle_scalar, orient, orient_perturbed,
+                              orient_perturbed_scalar, orient_scalar)
 from tests.profiles import examples
 
 
@@ -56,6 +57,31 @@ def test_orient_is_the_sign_of_the_exact_determinant(t):
     with mock.patch.object(predicates, "SCALAR_UNSURE", 0):  # every unsure one vectorised
         np.testing.assert_array_equal(orient(t[:, 0], t[:, 1], t[:, 2]), want)
     assert [orient_scalar(*t[k].ravel()) for k in range(len(t))] == want
+    # The vectorised path directly: its product comparison, then the few rows
+    # left one at a time (at most SCALAR_UNSURE) or by the expansion.
+    np.testing.assert_array_equal(predicates._exact_orient_many(t[:, 0], t[:, 1], t[:, 2]), want)
+    with mock.patch.object(predicates, "SCALAR_UNSURE", 0):
+        np.testing.assert_array_equal(predicates._exact_orient_many(t[:, 0], t[:, 1], t[:, 2]), want)
+    assert [predicates._exact_orient_integer(*t[k].ravel()) for k in range(len(t))] == want
+
+
+@settings(max_examples=examples(200, 3000))
+@given(hard_triangles(), st.integers(0, 2**32 - 1))
+def test_scalar_perturbed_predicates_equal_the_vectorised_ones(t, seed):
+    """Query points on, or within ulps of, an edge's line, on a vertex, or
+    on the edge's lattice: the perturbation decides the collinear ones."""
+    a, b, c = t[:, 0], t[:, 1], t[:, 2]
+    rng = np.random.default_rng(seed)
+    c = np.where(rng.random((len(t), 1)) < 0.2, a, c)  # some on a vertex
+    want = orient_perturbed(a, b, c)
+    assert [orient_perturbed_scalar(*a[k], *b[k], *c[k]) for k in range(len(t))] == want.tolist()
+    assert [orient_perturbed_scalar(*b[k], *a[k], *c[k]) for k in range(len(t))] == \
+        orient_perturbed(b, a, c).tolist()
+    # Triangles with the edge (a, b), the query near it, a third corner on either side.
+    d = a + np.roll(b - a, 1, axis=1) * [[-1.0, 1.0]] * rng.choice([-1.0, 1.0], (len(t), 1))
+    tri = np.stack([a, b, d], 1)
+    want = in_triangle_perturbed(tri, c)
+    assert [in_triangle_scalar(*tri[k].ravel(), *c[k]) for k in range(len(t))] == want.tolist()
 
 
 @settings(max_examples=examples(200, 3000))

@@ -7,8 +7,9 @@ run's exhaustive end). :func:`in_triangle_filtered` evaluates the same
 orientation determinants in JAX, with Shewchuk's forward error bound, and
 answers "inside", "outside" or "unsure"; :func:`locate_pairs` settles the
 unsure pairs with the exact host predicate
-(:func:`otjax.predicates.in_triangle_perturbed`). Its answers are
-therefore exactly the host predicate's, pair for pair.
+(:func:`otjax.predicates.in_triangle_perturbed`, or its scalar form
+:func:`otjax.predicates.in_triangle_scalar` for a few pairs). Its answers
+are therefore exactly the host predicate's, pair for pair.
 
 Why the filter is sound even if XLA fuses a multiply-add: the bound covers the
 rounding of both products and the subtraction; a fused evaluation rounds
@@ -24,7 +25,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from otjax.batch.pipeline import require_x64
-from otjax.predicates import ORIENT_ERR, in_triangle_perturbed
+from otjax.predicates import ORIENT_ERR, in_triangle_perturbed, in_triangle_scalar
 
 INSIDE, OUTSIDE, UNSURE = 1, 0, -1
 # Pairs per kernel call: one size, one compiled shape. A chunk costs ~0.25 ms;
@@ -33,6 +34,13 @@ CHUNK = 1 << 14
 # Fewer pairs than this are tested on the host, the filter in NumPy (below
 # the cost of one kernel call).
 MIN_PAIRS = 512
+# Unsure pairs, up to this many in a call, are settled one at a time in
+# Python (~2.4 us a pair); more by the vectorised predicate (~60 us a call,
+# then ~1-2 us a pair): break-even at 64-96 pairs on the clean 3k-point
+# star's unsure pairs, where 72% of the calls leave at most 64.
+SCALAR_PAIRS = 64
+# Rows of a triangle's second corners: edge k runs from corner k to corner k + 1.
+_NEXT_CORNER = np.array([2, 3, 4, 5, 0, 1])
 
 
 def _orient_perturbed_filtered(ax, ay, bx, by, px, py, xp=jnp) -> tuple[jax.Array, jax.Array]:
@@ -101,6 +109,61 @@ def _padding(size: int) -> tuple[np.ndarray, np.ndarray]:
     return tri, np.full((2, size), 2.0)
 
 
+def _kernel_codes(tri: np.ndarray, p: np.ndarray) -> np.ndarray:
+    """:func:`in_triangle_filtered` of ``(6, N)`` triangles and ``(2, N)`` points, in chunks.
+
+    Returns:
+      ``(N,)`` int8 codes, as :func:`in_triangle_rows`.
+    """
+    n = p.shape[1]
+    out = np.empty(n, np.int8)
+    require_x64("exact point location")
+    pending = []
+    for s in range(0, n, CHUNK):
+        t, q = tri[:, s:s + CHUNK], p[:, s:s + CHUNK]
+        if q.shape[1] < CHUNK:
+            pad_t, pad_q = _padding(CHUNK)
+            t = np.concatenate([t, pad_t[:, q.shape[1]:]], 1)
+            q = np.concatenate([q, pad_q[:, q.shape[1]:]], 1)
+        pending.append((s, in_triangle_filtered(t, q)))  # dispatched asynchronously
+    for s, res in pending:
+        res = np.asarray(res)
+        out[s:s + len(res)] = res[: n - s]
+    return out
+
+
+def _edge_signs(tri: np.ndarray, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`_orient_perturbed_filtered` of the three edges at once, in NumPy.
+
+    One pass over ``(3, N)`` rows rather than three over ``(N,)``: on the
+    few hundred pairs of a typical host call NumPy's per-call overhead, not
+    the arithmetic, is the cost.
+
+    Args:
+      tri: ``(6, N)`` float64 rows ``x0, y0, x1, y1, x2, y2``.
+      p: ``(2, N)`` float64 query points, as rows.
+
+    Returns:
+      ``(positive, negative)``, each ``(3, N)`` bool; row ``k`` is the edge
+      from corner ``k`` to corner ``k + 1 mod 3``.
+    """
+    ends = tri[_NEXT_CORNER]
+    return _orient_perturbed_filtered(tri[0::2], tri[1::2], ends[0::2], ends[1::2], p[0], p[1], np)
+
+
+def _settle(tri: np.ndarray, p: np.ndarray, idx: np.ndarray) -> np.ndarray:
+    """Exact answers of the pairs ``idx`` the filter left unsure, ``(k,)`` bool.
+
+    A few go one at a time through the scalar predicate, where NumPy's
+    per-call overhead would dominate; more through the vectorised one (which
+    evaluates exactly only the edges its own filter leaves unsure).
+    """
+    t, q = np.take(tri, idx, axis=1).T, np.take(p, idx, axis=1).T
+    if len(idx) <= SCALAR_PAIRS:
+        return np.array([in_triangle_scalar(*c, *x) for c, x in zip(t.tolist(), q.tolist())], bool)
+    return in_triangle_perturbed(t.reshape(-1, 3, 2), q)
+
+
 def locate_pairs(tri: np.ndarray, p: np.ndarray, min_pairs: int = MIN_PAIRS) -> np.ndarray:
     """Exact perturbed point-in-triangle test for many pairs.
 
@@ -108,7 +171,7 @@ def locate_pairs(tri: np.ndarray, p: np.ndarray, min_pairs: int = MIN_PAIRS) -> 
     computed by the filtered kernel in fixed-size chunks (below
     ``min_pairs``, by the same filter in NumPy); the unsure pairs (a handful
     on noisy data, more on exactly collinear data) go to the exact host
-    predicate.
+    predicate (:func:`_settle`).
 
     Args:
       tri: ``(6, N)`` float64 rows ``x0, y0, x1, y1, x2, y2`` of
@@ -120,31 +183,15 @@ def locate_pairs(tri: np.ndarray, p: np.ndarray, min_pairs: int = MIN_PAIRS) -> 
     Returns:
       ``(N,)`` bool.
     """
-    n = p.shape[1]
-
-    def exact(idx):
-        return in_triangle_perturbed(tri[:, idx].T.reshape(-1, 3, 2), p[:, idx].T)
-
-    if n < min_pairs:
+    if p.shape[1] < min_pairs:
         # The kernel's filter in NumPy, on the rows as they are: cheaper than
         # the exact predicate's (N, 3, 2) layout on every pair.
-        out = in_triangle_rows(tri, p[0], p[1], np)
+        positive, negative = _edge_signs(tri, p)
+        hold = positive.all(0)
+        unsure = np.flatnonzero(~(hold | negative.any(0)))
     else:
-        out = np.empty(n, np.int8)
-        require_x64("exact point location")
-        pending = []
-        for s in range(0, n, CHUNK):
-            t, q = tri[:, s:s + CHUNK], p[:, s:s + CHUNK]
-            if q.shape[1] < CHUNK:
-                pad_t, pad_q = _padding(CHUNK)
-                t = np.concatenate([t, pad_t[:, q.shape[1]:]], 1)
-                q = np.concatenate([q, pad_q[:, q.shape[1]:]], 1)
-            pending.append((s, in_triangle_filtered(t, q)))  # dispatched asynchronously
-        for s, res in pending:
-            res = np.asarray(res)
-            out[s:s + len(res)] = res[: n - s]
-    hold = out == INSIDE
-    unsure = np.flatnonzero(out == UNSURE)
+        out = _kernel_codes(tri, p)
+        hold, unsure = out == INSIDE, np.flatnonzero(out == UNSURE)
     if len(unsure):
-        hold[unsure] = exact(unsure)
+        hold[unsure] = _settle(tri, p, unsure)
     return hold

@@ -2,10 +2,13 @@
 
 import numpy as np
 import pytest
+from unittest import mock
+
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from otjax.curves.location import CHUNK, locate_pairs
+from otjax.curves import location
+from otjax.curves.location import CHUNK, MIN_PAIRS, locate_pairs
 from otjax.curves.triangulation import Triangulation
 from otjax.predicates import in_triangle_perturbed
 from tests.point_sets import make_points
@@ -91,6 +94,57 @@ def test_whole_triangulation_location_equals_the_exact_predicate(kind, n, seed, 
     assert (inside.sum(1) == 1).all()
     ids = np.asarray(tri.triangle_ids())
     np.testing.assert_array_equal(tri.locate(queries), ids[inside.argmax(1)])
+
+
+def degenerate_pairs(rng, n: int, lattice: bool) -> tuple[np.ndarray, np.ndarray]:
+    """``(n, 3, 2)`` mostly CCW triangles and ``(n, 2)`` points on or by their edges.
+
+    Points on an edge's line (inside the edge or beyond it) rounded, then
+    moved by a few ulps; on a vertex; on the lattice (exactly collinear,
+    where the perturbation decides); and at random. ``lattice`` puts the
+    corners on a coarse power-of-two lattice, where many differences and
+    products are exact.
+    """
+    scale = 2.0 ** rng.integers(-20, 20)
+    offset = rng.choice([0.0, 1.0, 1e3]) * scale * rng.standard_normal(2)  # rounded translations
+    if lattice:
+        tri = rng.integers(-4, 5, size=(n, 3, 2)) * scale
+    else:
+        tri = offset + rng.standard_normal((n, 3, 2)) * scale
+    u, v = tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]
+    flip = u[:, 0] * v[:, 1] - u[:, 1] * v[:, 0] < 0
+    tri[flip] = tri[flip][:, [0, 2, 1]]
+    edge = rng.integers(0, 3, n)
+    a, b = tri[np.arange(n), edge], tri[np.arange(n), (edge + 1) % 3]
+    kind = rng.integers(0, 5, n)
+    t = rng.choice([0.0, 0.25, 0.5, 1.0, 1.5, -0.5], n) if lattice else rng.uniform(-0.5, 1.5, n)
+    p = a + t[:, None] * (b - a)
+    ulps = rng.integers(-2, 3, size=(n, 2))
+    nudge = kind == 1
+    # Not off zero: a subnormal coordinate, which the kernel flushes to zero
+    # (XLA on CPU), is outside what the library asks about.
+    p[nudge] = p[nudge] + np.where(p[nudge] != 0, ulps[nudge] * np.spacing(np.abs(p[nudge])), 0.0)
+    p[kind == 2] = tri[kind == 2, rng.integers(0, 3)]
+    lo, hi = tri.min((0, 1)), tri.max((0, 1))
+    p[kind == 3] = lo + rng.random(((kind == 3).sum(), 2)) * (hi - lo)
+    return tri, p
+
+
+@settings(max_examples=examples(100, 1000), deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(n=st.one_of(st.integers(1, 80), st.integers(MIN_PAIRS - 8, 2 * MIN_PAIRS)), lattice=st.booleans(),
+       seed=st.integers(0, 2**32 - 1))
+def test_degenerate_location_equals_the_exact_predicate(n, lattice, seed):
+    """Points on, within ulps of, and beyond the triangles' edges, on their
+    vertices: every path of :func:`locate_pairs` (filter in the kernel or in
+    NumPy, unsure pairs settled one at a time or vectorised) gives the exact
+    predicate's answer, pair for pair."""
+    tri, p = degenerate_pairs(np.random.default_rng(seed), n, lattice)
+    want = in_triangle_perturbed(tri, p)
+    np.testing.assert_array_equal(locate_pairs(*rows(tri, p)), want)
+    for scalar_pairs in (0, n):
+        with mock.patch.object(location, "SCALAR_PAIRS", scalar_pairs):
+            np.testing.assert_array_equal(locate_pairs(*rows(tri, p), min_pairs=n + 1), want)
+            np.testing.assert_array_equal(locate_pairs(*rows(tri, p), min_pairs=0), want)
 
 
 @pytest.mark.parametrize("seed", range(4))
