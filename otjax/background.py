@@ -54,6 +54,13 @@ FLAT_SIGMAS = 5.0
 #: within ``THIN`` median scales (:func:`near_shape`, docs/decisions.md#background).
 SUPPORTING_FLATS = 2
 THIN = 2.0
+#: A point whose shape weight is below ``DOUBT`` (the density leaves it a
+#: fair chance of being background) passes the own-flat test only where its
+#: neighbourhood is at most ``WIDER`` times as thick as its neighbours' own
+#: (median of their scales): one off the shape reaches for a wide patch
+#: (:func:`near_shape`, docs/decisions.md#background).
+DOUBT = 0.9
+WIDER = 2.0
 #: Neighbours of the flats :func:`flat_noise` measures the noise about:
 #: fewer follow the noise (docs/decisions.md#feature_fit).
 NOISE_NEIGHBOURS = 32
@@ -240,7 +247,13 @@ def near_shape(points: np.ndarray, weights: np.ndarray, neighbours: int = NEIGHB
     at most ``sigmas`` scales. Where one flat does not fit (a crease, a
     corner) the neighbours' own residuals are large, and so is the scale:
     the point stays. Outliers close together raise each other's scale and
-    may stay. A point off that flat still stays when it lies within
+    may stay. An outlier a few neighbourhood widths off a surface has the
+    surface's points for neighbours, spread over a patch wider and more
+    curved than theirs, and a flat tilted towards it: where its weight is
+    below :data:`DOUBT`, it passes only if its neighbourhood's scale is at
+    most :data:`WIDER` times the median of its neighbours' own (a point at
+    a crease, whose neighbours straddle it too, is as thick as they are).
+    A point off that flat still stays when it lies within
     ``sigmas`` median scales of at least :data:`SUPPORTING_FLATS` of its
     neighbours' own flats that are thin (residuals within :data:`THIN`
     median scales), each refitted without the point: a point of a sheet at
@@ -259,6 +272,8 @@ def near_shape(points: np.ndarray, weights: np.ndarray, neighbours: int = NEIGHB
     floor = max(float(np.median(local[weights > 0])), 1e-9 * float(np.linalg.norm(np.ptp(points, axis=0))))
     gap = np.abs(np.einsum("nd,nd->n", points - centre, normal))
     near = gap <= sigmas * _MAD_TO_SIGMA * np.maximum(local, floor)
+    doubt = weights < DOUBT
+    near[doubt] &= local[doubt] <= WIDER * np.maximum(np.median(local[idx[doubt]], axis=1), floor)
     # Second chance where one flat does not fit: a point of a sheet at a
     # crease whose neighbours are mostly on the other sheet, or at a border
     # where they lean to one side, lies on some neighbour's flat.
