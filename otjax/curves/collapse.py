@@ -87,49 +87,140 @@ def edge_key(u: int, v: int) -> tuple[int, int]:
 
 
 def orient_ids(xy: list, a: int, b: int, c: int) -> int:
-    """Exact orientation of the vertices ``a, b, c`` of ``xy`` (a list of ``[x, y]``)."""
+    """Exact orientation of the vertices ``a, b, c`` of ``xy`` (a list of ``[x, y]``).
+
+    :func:`~otjax.predicates.orient_scalar` with its float filter inline
+    (the same arithmetic, the same answer): planning asks it ~10^6 times
+    a run and most answers are certain, so the exact predicate is called
+    only when unsure.
+    """
     (ax, ay), (bx, by), (cx, cy) = xy[a], xy[b], xy[c]
+    left = (bx - ax) * (cy - ay)
+    right = (by - ay) * (cx - ax)
+    det = left - right
+    bound = ORIENT_ERR * (abs(left) + abs(right))
+    if det > bound:
+        return 1
+    if -det > bound:
+        return -1
     return orient_scalar(ax, ay, bx, by, cx, cy)
+
+
+class _Corners:
+    """Ear tests of the corners ``(c, a, b)`` of polygons cut from the ring of
+    ``source``, shared by the targets planned together.
+
+    Both tests depend on the ring's positions alone; the polygons of the
+    targets share most corners (every target starts from the ring), so each
+    corner is tested once per source.
+    """
+
+    def __init__(self, xyl: list, source: int, ring):
+        self.xyl, self.source, self.ring = xyl, source, ring
+        self._flip: dict[tuple[int, int, int], bool] = {}
+        self._inside: dict[tuple[int, int, int], tuple | None] = {}
+
+    def flips(self, c: int, a: int, b: int) -> bool:
+        """Whether the paper's flip may take ``a`` out: corner ``(c, a, b)``
+        convex and quadrilateral ``(source, c, a, b)`` convex."""
+        key = (c, a, b)
+        hit = self._flip.get(key)
+        if hit is None:
+            xyl = self.xyl
+            hit = self._flip[key] = orient_ids(xyl, c, a, b) > 0 and orient_ids(xyl, self.source, c, b) > 0
+        return hit
+
+    def clips(self, c: int, a: int, b: int, poly: list) -> bool:
+        """Whether ``(c, a, b)`` is an ear of ``poly`` (a subsequence of the
+        ring): a convex corner with no other vertex of ``poly`` in the
+        closed triangle."""
+        key = (c, a, b)
+        inside = self._inside.get(key, False)
+        if inside is False:
+            inside = self._inside[key] = self._in_triangle(c, a, b)
+        if inside is None:
+            return False
+        for x in inside:
+            if x in poly:
+                return False
+        return True
+
+    def _in_triangle(self, c: int, a: int, b: int) -> tuple | None:
+        """The ring vertices other than ``c, a, b`` in the closed triangle
+        ``(c, a, b)``, or ``None`` if the corner is not convex."""
+        xyl = self.xyl
+        if orient_ids(xyl, c, a, b) <= 0:
+            return None
+        return tuple(x for x in self.ring if x != c and x != a and x != b and orient_ids(xyl, c, a, x) >= 0
+                     and orient_ids(xyl, a, b, x) >= 0 and orient_ids(xyl, b, c, x) >= 0)
 
 
 class _Ring:
     """The one-ring polygon of a collapse being planned, and its tests.
 
-    Planning asks for the side of ``target`` against each polygon edge and
-    for each edge's cut several times (once per clip); both depend on the
-    edge alone, so they are computed once per edge.
+    ``cuts[k]`` is the cut of polygon edge ``k`` (``(poly[k], poly[k+1])``)
+    when it blocks ``target``, else ``None``; a clip replaces the two edges
+    at the clipped vertex by one, so only that edge is tested again.
     """
 
-    def __init__(self, tri, source: int, target: int, ring):
-        self.xy = tri.xy
-        self.xyl = tri.xy_list
-        self.source, self.target = source, target
-        self.poly = list(ring)
-        self._span = None  # |target - source|, read by cut only: most collapses need no flip
-        self._side: dict[tuple[int, int], int] = {}
+    def __init__(self, corners: _Corners, target: int, edges):
+        self.corners, self.xyl, self.target = corners, corners.xyl, target
+        self.poly = list(corners.ring)
+        self._span = None  # |target - source|, read by the cuts only
         self._cut: dict[tuple[int, int], float] = {}
+        self.cuts = self._ring_cuts(edges)
 
-    def side(self, a: int, b: int) -> int:
-        """Exact orientation of ``(target, a, b)``."""
-        hit = self._side.get((a, b))
-        if hit is None:
-            hit = self._side[(a, b)] = orient_ids(self.xyl, self.target, a, b)
-        return hit
+    def _ring_cuts(self, edges) -> list[float | None]:
+        """``cuts`` of the ring's edges ``(a, b, ax, ay, bx, by)``: the
+        orientation filter inline on the coordinates read once per source
+        (:func:`orient_ids` when unsure), the same answers."""
+        target = self.target
+        tx, ty = self.xyl[target]
+        cuts: list[float | None] = []
+        for a, b, ax, ay, bx, by in edges:
+            if a == target or b == target:
+                cuts.append(None)
+                continue
+            left = (ax - tx) * (by - ty)
+            right = (ay - ty) * (bx - tx)
+            det = left - right
+            bound = ORIENT_ERR * (abs(left) + abs(right))
+            if det > bound or (not -det > bound and orient_scalar(tx, ty, ax, ay, bx, by) > 0):
+                cuts.append(None)  # (target, a, b) CCW: the edge does not block
+            else:
+                cuts.append(self._crossing(a, b))
+        return cuts
+
+    def _blocking_cut(self, a: int, b: int) -> float | None:
+        """The cut of edge ``(a, b)`` if it blocks ``target`` (away from it,
+        ``(target, a, b)`` not CCW), else ``None``."""
+        target = self.target
+        if a == target or b == target or orient_ids(self.xyl, target, a, b) > 0:
+            return None
+        return self._crossing(a, b)
 
     def cut(self, a: int, b: int) -> float:
         """Distance from target to where line ``(a, b)`` crosses source -> target:
-        how much removing ``(a, b)`` from the polygon elongates its kernel."""
+        how much removing ``(a, b)`` from the polygon elongates its kernel
+        (``0`` when ``(target, a, b)`` is CCW)."""
         hit = self._cut.get((a, b))
         if hit is not None:
             return hit
-        if self.side(a, b) > 0:
+        if orient_ids(self.xyl, self.target, a, b) > 0:
             self._cut[(a, b)] = 0.0
             return 0.0
+        return self._crossing(a, b)
+
+    def _crossing(self, a: int, b: int) -> float:
+        """:meth:`cut` of an edge ``(a, b)`` known not CCW from ``target``."""
+        hit = self._cut.get((a, b))
+        if hit is not None:
+            return hit
         # Python floats: the same double arithmetic as on the array, without
         # NumPy's per-scalar overhead.
         xyl = self.xyl
         (ax, ay), (bx, by) = xyl[a], xyl[b]
-        (sx, sy), (tx, ty) = xyl[self.source], xyl[self.target]
+        (sx, sy), (tx, ty) = xyl[self.corners.source], xyl[self.target]
         ex, ey = bx - ax, by - ay
         da = ex * (sy - ay) - ey * (sx - ax)
         db = ex * (ty - ay) - ey * (tx - ax)
@@ -143,59 +234,46 @@ class _Ring:
         """Whether polygon vertex ``j`` may leave the polygon: by the paper's
         flip (``with_source``: quadrilateral ``(source, c, a, b)`` convex) or
         as an ear (convex corner, no other polygon vertex in the triangle)."""
-        poly, xyl = self.poly, self.xyl
-        n = len(poly)
-        c, a, b = poly[j - 1], poly[j], poly[(j + 1) % n]
-        if a == self.target or orient_ids(xyl, c, a, b) <= 0:
+        poly = self.poly
+        c, a, b = poly[j - 1], poly[j], poly[(j + 1) % len(poly)]
+        if a == self.target:
             return False
-        if with_source:
-            return orient_ids(xyl, self.source, c, b) > 0
-        # Scalar predicates with early exit: rings are short, and NumPy's
-        # per-call overhead made this the hottest line on collinear data.
-        for x in poly:
-            if x in (c, a, b):
-                continue
-            if orient_ids(xyl, c, a, x) >= 0 and orient_ids(xyl, a, b, x) >= 0 and orient_ids(xyl, b, c, x) >= 0:
-                return False
-        return True
-
-    def blocking(self) -> list[tuple[float, int]]:
-        """``(cut, k)`` of the polygon edges ``k`` that block the target,
-        by decreasing cut."""
-        poly, target = self.poly, self.target
-        # The caches read inline: blocking runs once per clip over every edge.
-        sides, cuts = self._side, self._cut
-        out = []
-        for k, (a, b) in enumerate(zip(poly, poly[1:] + poly[:1])):
-            if a == target or b == target:
-                continue
-            side = sides.get((a, b))
-            if side is None:
-                side = self.side(a, b)
-            if side <= 0:
-                cut = cuts.get((a, b))
-                out.append((self.cut(a, b) if cut is None else cut, k))
-        out.sort(key=lambda t: (-t[0], t[1]))
-        return out
+        return self.corners.flips(c, a, b) if with_source else self.corners.clips(c, a, b, poly)
 
     def next_clip(self) -> int | None:
         """The polygon vertex to take out next, or ``None`` once nothing blocks.
 
-        By decreasing cut, the first blocking edge with an endpoint the
-        paper's flip can take out (the one leaving the smaller cut); else one
-        an ear clip can; else any ear.
+        By decreasing cut (then polygon order), the first blocking edge with
+        an endpoint the paper's flip can take out (the one leaving the
+        smaller cut); else one an ear clip can; else any ear.
         """
-        blocking = self.blocking()
+        blocking = sorted([(-cut, k) for k, cut in enumerate(self.cuts) if cut is not None])
         if not blocking:
             return None
-        poly, n = self.poly, len(self.poly)
+        poly, n, target, corners = self.poly, len(self.poly), self.target, self.corners
         for with_source in (True, False):
             for _, k in blocking:
-                options = [(self.cut(poly[j - 1], poly[(j + 1) % n]), j)
-                           for j in (k, (k + 1) % n) if self.is_ear(j, with_source)]
-                if options:
-                    return min(options)[1]
+                best = None
+                for j in (k, (k + 1) % n):
+                    # is_ear, inline: this loop runs once per clip and target.
+                    c, a, b = poly[j - 1], poly[j], poly[(j + 1) % n]
+                    if a != target and (corners.flips(c, a, b) if with_source else corners.clips(c, a, b, poly)):
+                        option = (self.cut(c, b), j)
+                        if best is None or option < best:
+                            best = option
+                if best is not None:
+                    return best[1]
         return next(j for j in range(n) if self.is_ear(j, False))
+
+    def clip(self, j: int) -> tuple[int, int, int]:
+        """Takes polygon vertex ``j`` out; returns its ear ``(c, a, b)``."""
+        poly, cuts = self.poly, self.cuts
+        c, a, b = poly[j - 1], poly[j], poly[(j + 1) % len(poly)]
+        del poly[j]
+        del cuts[j]
+        # Edges j - 1 and j became one, now at j - 1 (the last when j was 0).
+        cuts[j - 1] = self._blocking_cut(c, b)
+        return (c, a, b)
 
 
 class Flips(NamedTuple):
@@ -274,6 +352,7 @@ def plan_flips_from(tri, source: int, targets) -> list[Flips | None]:
         return [None] * len(targets)
     ring, star = tri.star(source)
     edges = [(a, b, *xyl[a], *xyl[b]) for a, b in zip(ring, ring[1:] + ring[:1])]
+    corners = None  # made at the first target that needs flips
     out = []
     for target in targets:
         if pinned[target] or target not in ring:
@@ -282,24 +361,25 @@ def plan_flips_from(tri, source: int, targets) -> list[Flips | None]:
         fan = _visible_fan(xyl[target], target, edges)
         if fan is not None:
             out.append(Flips(ring, star, (), (), ring, fan))
-        else:
-            out.append(_clipped_flips(tri, source, target, ring, star))
+            continue
+        if corners is None:
+            corners = _Corners(xyl, source, ring)
+        out.append(_clipped_flips(corners, target, star, edges))
     return out
 
 
-def _clipped_flips(tri, source: int, target: int, ring, star) -> Flips:
-    """The flips of :func:`plan_collapse` when some ring edge may block ``target``."""
-    polygon = _Ring(tri, source, target, ring)
-    poly = polygon.poly
+def _clipped_flips(corners: _Corners, target: int, star, edges) -> Flips:
+    """The flips of :func:`plan_collapse` when some ring edge may block
+    ``target`` (``edges``: as in :func:`_visible_fan`)."""
+    polygon = _Ring(corners, target, edges)
     clipped: list[int] = []
     flipped_out: list[tuple[int, int, int]] = []
     while (chosen := polygon.next_clip()) is not None:
-        n = len(poly)
-        a = poly[chosen]
-        flipped_out.append((poly[chosen - 1], a, poly[(chosen + 1) % n]))
-        clipped.append(a)
-        del poly[chosen]
-    return Flips(tuple(ring), tuple(star), tuple(clipped), tuple(flipped_out), tuple(poly), _fan(target, poly))
+        ear = polygon.clip(chosen)
+        flipped_out.append(ear)
+        clipped.append(ear[1])
+    poly = polygon.poly
+    return Flips(tuple(corners.ring), tuple(star), tuple(clipped), tuple(flipped_out), tuple(poly), _fan(target, poly))
 
 
 def _fan(target: int, poly) -> tuple[tuple[int, int, int], ...]:

@@ -274,7 +274,7 @@ def export_jobs(jobs: list[Job], plan, on_host: bool) -> HostBatch:
         tri_start=tri_start, edge_xy=edges.xy, edge_job=edges.job,
         tri_xy=np.ascontiguousarray(coords.reshape(-1, 6).T), tri_edges=edges.of_triangle, fan_key=fans.key,
         fan_tri=fans.tri, job_fan=fans.job_fan, job_apex=fans.apex, job_theta=fans.theta, job_ears=fans.ears,
-        before=np.array([job.region.before for job in jobs]), n_inside=rows.n_inside)
+        before=per_job.before, n_inside=rows.n_inside)
     if on_host:
         locate_on_host(batch, np.arange(len(jobs)), points, point_rows)
     elif not fans.few_ears.all():

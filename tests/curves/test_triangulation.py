@@ -5,8 +5,8 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from otjax.predicates import orient, orient_perturbed
-from otjax.curves.collapse import plan_flips, plan_flips_from
+from otjax.predicates import orient, orient_perturbed, orient_scalar
+from otjax.curves.collapse import _Corners, plan_flips, plan_flips_from
 from otjax.curves.triangulation import Triangulation
 from tests.point_sets import make_points, point_sets
 from tests.profiles import examples  # CI count, thorough count (--hypothesis-profile=thorough)
@@ -72,6 +72,33 @@ def test_flips_planned_together_match_flips_planned_alone(pts, seed):
         for w, flips in zip(targets, together):
             assert (flips is None) == (t.pinned[w] or w not in ring)
     assert plan_flips_from(t, corners[0], [0]) == [None]
+
+
+@SETTINGS
+@given(pts=point_sets, seed=st.integers(0, 2**31 - 1))
+def test_shared_ear_tests_match_their_definition(pts, seed):
+    """_Corners answers a corner's ear tests once per source for every
+    polygon cut from the ring: the same answers as testing that polygon."""
+    t = Triangulation(unique_rows(pts))
+    rng = np.random.default_rng(seed)
+    random_collapses(t, rng, 10)
+    xyl = t.xy_list
+
+    def orient_ids(a, b, c):  # the oracle: the predicate itself, not collapse.py's inlined filter
+        return orient_scalar(*xyl[a], *xyl[b], *xyl[c])
+
+    for s in np.flatnonzero(t.alive & ~t.pinned).tolist()[:20]:
+        ring = t.star(s)[0]
+        corners = _Corners(xyl, s, ring)
+        for _ in range(3):  # polygons: subsequences of the ring, shared memo
+            poly = [v for v in ring if rng.random() < 0.7]
+            for j in range(len(poly) if len(poly) >= 3 else 0):
+                c, a, b = poly[j - 1], poly[j], poly[(j + 1) % len(poly)]
+                convex = orient_ids(c, a, b) > 0
+                assert corners.flips(c, a, b) == (convex and orient_ids(s, c, b) > 0)
+                empty = not any(orient_ids(c, a, x) >= 0 and orient_ids(a, b, x) >= 0
+                                and orient_ids(b, c, x) >= 0 for x in poly if x not in (c, a, b))
+                assert corners.clips(c, a, b, poly) == (convex and empty)
 
 
 def test_initial_triangulation_is_delaunay_and_complete(rng):
