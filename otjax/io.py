@@ -265,8 +265,12 @@ def atomic_write(path, mode: str = "w"):
       mode: ``"w"`` (text, UTF-8) or ``"wb"`` (binary).
 
     Example:
-      >>> with atomic_write(tmp / "out.txt") as f:  # doctest: +SKIP
-      ...     f.write("done")
+      >>> import tempfile
+      >>> with tempfile.TemporaryDirectory() as tmp:
+      ...     with atomic_write(Path(tmp) / "sub" / "out.txt") as f:
+      ...         _ = f.write("done")
+      ...     (Path(tmp) / "sub" / "out.txt").read_text()
+      'done'
     """
     if mode not in ("w", "wb"):
         raise ValueError(f"mode must be 'w' or 'wb', got {mode!r}")
@@ -462,7 +466,12 @@ def write_points(path, points, masses=None) -> None:
       masses: ``(n,)`` masses, or ``None`` for a two-column file.
 
     Example:
-      >>> write_points(tmp / "star.xy", np.zeros((3, 2)))  # doctest: +SKIP
+      >>> import tempfile
+      >>> with tempfile.TemporaryDirectory() as tmp:
+      ...     write_points(Path(tmp) / "star.xy", np.array([[0.5, 1.0], [2.0, -3.0]]))
+      ...     read_points(Path(tmp) / "star.xy")[0]
+      array([[ 0.5,  1. ],
+             [ 2. , -3. ]])
     """
     points = np.asarray(points, dtype=np.float64)
     if points.ndim != 2 or points.shape[1] != 2:
