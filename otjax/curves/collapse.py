@@ -163,33 +163,13 @@ class _Ring:
     at the clipped vertex by one, so only that edge is tested again.
     """
 
-    def __init__(self, corners: _Corners, target: int, edges):
+    def __init__(self, corners: _Corners, target: int):
         self.corners, self.xyl, self.target = corners, corners.xyl, target
         self.poly = list(corners.ring)
         self._span = None  # |target - source|, read by the cuts only
         self._cut: dict[tuple[int, int], float] = {}
-        self.cuts = self._ring_cuts(edges)
-
-    def _ring_cuts(self, edges) -> list[float | None]:
-        """``cuts`` of the ring's edges ``(a, b, ax, ay, bx, by)``: the
-        orientation filter inline on the coordinates read once per source
-        (:func:`orient_ids` when unsure), the same answers."""
-        target = self.target
-        tx, ty = self.xyl[target]
-        cuts: list[float | None] = []
-        for a, b, ax, ay, bx, by in edges:
-            if a == target or b == target:
-                cuts.append(None)
-                continue
-            left = (ax - tx) * (by - ty)
-            right = (ay - ty) * (bx - tx)
-            det = left - right
-            bound = ORIENT_ERR * (abs(left) + abs(right))
-            if det > bound or (not -det > bound and orient_scalar(tx, ty, ax, ay, bx, by) > 0):
-                cuts.append(None)  # (target, a, b) CCW: the edge does not block
-            else:
-                cuts.append(self._crossing(a, b))
-        return cuts
+        poly = self.poly
+        self.cuts = [self._blocking_cut(a, b) for a, b in zip(poly, poly[1:] + poly[:1])]
 
     def _blocking_cut(self, a: int, b: int) -> float | None:
         """The cut of edge ``(a, b)`` if it blocks ``target`` (away from it,
@@ -364,14 +344,13 @@ def plan_flips_from(tri, source: int, targets) -> list[Flips | None]:
             continue
         if corners is None:
             corners = _Corners(xyl, source, ring)
-        out.append(_clipped_flips(corners, target, star, edges))
+        out.append(_clipped_flips(corners, target, star))
     return out
 
 
-def _clipped_flips(corners: _Corners, target: int, star, edges) -> Flips:
-    """The flips of :func:`plan_collapse` when some ring edge may block
-    ``target`` (``edges``: as in :func:`_visible_fan`)."""
-    polygon = _Ring(corners, target, edges)
+def _clipped_flips(corners: _Corners, target: int, star) -> Flips:
+    """The flips of :func:`plan_collapse` when some ring edge may block ``target``."""
+    polygon = _Ring(corners, target)
     clipped: list[int] = []
     flipped_out: list[tuple[int, int, int]] = []
     while (chosen := polygon.next_clip()) is not None:
