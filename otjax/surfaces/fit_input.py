@@ -11,7 +11,6 @@ from typing import NamedTuple
 import numpy as np
 
 from otjax.background import NOISE_NEIGHBOURS, flat_noise
-
 from otjax.surfaces.relocation import MIN_ASPECT, aspect
 from otjax.surfaces.star_plan import face_normals
 
