@@ -60,7 +60,10 @@ class CurveEngine:
       max_source_degree: see :class:`~otjax.curves.stencils.StencilCache`.
       incremental: bring the scores of collapses whose star kept its
         triangles up to date on the changed edges only (same scores, fewer
-        scored rows), when the loop re-scores everything a change made dirty.
+        scored rows), when the loop re-scores everything a change made dirty;
+        and leave the vertices across the changed region whose link edges
+        kept their points and costs unscored (``Change.quiet``: the loop
+        enters their scores again as they were).
       update_min_rows: stencils below this many rows are scored again in
         full instead (docs/decisions.md#update_min_rows).
 
@@ -256,6 +259,11 @@ class CurveEngine:
     def apply(self, candidate: CandidateStencil, cost: CandidateCost) -> Change:
         """Applies a scored change to the plan and logs it; returns the :class:`Change`."""
         change = self.plan.apply(candidate, cost)
+        if change.quiet:
+            # Without incremental re-scoring the coarser rule holds: every
+            # vertex across the changed region is scored again.
+            woken = self.stencils.changed_plans(change) if self.incremental else change.quiet
+            change = change.woken(woken, self.movable)
         self.log.record(change)
         self.stencils.forget(change.source)
         for v in change.touched | {change.source}:  # their stencils are stale now

@@ -43,6 +43,11 @@ class Change(NamedTuple):
         only saw the far side of some link edges change, those edge keys.
       dirty: the live, free vertices of ``touched``: every half-edge leaving one
         of them must be scored again.
+      quiet: vertices next to the changed region (its faces across their
+        link) left out of ``touched``: every link edge they share with it kept
+        its points and its cost, so nothing of their region changed. Their
+        collapses onto a vertex whose star changed may still have gained or
+        lost the link condition (the engine checks).
     """
 
     source: int
@@ -52,6 +57,18 @@ class Change(NamedTuple):
     touched: frozenset
     links: dict
     dirty: frozenset
+    quiet: frozenset = frozenset()
+
+    def woken(self, vertices, free) -> Change:
+        """This change with ``vertices`` (of :attr:`quiet`) moved to
+        :attr:`touched` (their stars kept their triangles and no link edge
+        changed: :attr:`links` of none), and to :attr:`dirty` where ``free(v)``."""
+        vertices = frozenset(vertices)
+        if not vertices:
+            return self
+        return self._replace(touched=self.touched | vertices, dirty=self.dirty | {v for v in vertices if free(v)},
+                             links={**self.links, **{v: frozenset() for v in vertices}},
+                             quiet=self.quiet - vertices)
 
 
 def segment_sqdist_np(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -222,10 +239,10 @@ class TransportPlan:
                 raise ValueError("stale relocation: the star has changed")
             tri.move(v, cand.moved)
             new_ids = np.asarray(plan.star, np.int64)
-        self._reassign(cand, scored, new_ids)
-        return self._change(cand, new_ids)
+        kept = self._reassign(cand, scored, new_ids)
+        return self._change(cand, new_ids, kept)
 
-    def _reassign(self, cand, scored, new_ids: np.ndarray) -> None:
+    def _reassign(self, cand, scored, new_ids: np.ndarray) -> set:
         plan = cand.plan
         inside = cand.point_ids[:cand.n_inside]
         fid = new_ids[scored.triangle]
@@ -238,15 +255,26 @@ class TransportPlan:
             for f, chunk in zip(uf, np.split(inside[order], st[1:])):
                 self.face_pts[int(f)] = chunk
         self.pt_edge[cand.point_ids] = np.take(cand.keys, scored.assignment, axis=0)
-        self.pt_code[cand.point_ids] = np.take(cand.keys[:, 0] * len(self.tri.xy) + cand.keys[:, 1],
-                                               scored.assignment)
-        for k, c, n, solid in zip(map(tuple, cand.keys.tolist()), scored.edge_cost.tolist(),
-                                  scored.normal.tolist(), scored.solid.tolist()):
+        codes = cand.keys[:, 0] * len(self.tri.xy) + cand.keys[:, 1]
+        old_code = self.pt_code[cand.point_ids]
+        new_code = np.take(codes, scored.assignment)
+        self.pt_code[cand.point_ids] = new_code
+        switched = old_code != new_code
+        # An edge whose points and cost are what they were changed nothing
+        # for the stars on its far side (Change.quiet).
+        reassigned = set(old_code[switched].tolist()) | set(new_code[switched].tolist())
+        kept = set()
+        get = self.edge_cost.get
+        for k, code, c, n, solid in zip(map(tuple, cand.keys.tolist()), codes.tolist(), scored.edge_cost.tolist(),
+                                        scored.normal.tolist(), scored.solid.tolist()):
+            if code not in reassigned and get(k) == c:
+                kept.add(k)
             self.edge_cost[k] = c
             self.edge_normal[k] = n
             self.edge_solid[k] = solid
+        return kept
 
-    def _change(self, cand, new_ids: np.ndarray) -> Change:
+    def _change(self, cand, new_ids: np.ndarray, kept: set) -> Change:
         """The vertices of the new triangles and of the triangles next to
         them: every vertex whose star, faces across its link, their points
         or its star's edge costs changed. The far vertex of a face across
@@ -256,6 +284,7 @@ class TransportPlan:
         tri = self.tri
         full = {*plan.ring, plan.source}
         links: dict[int, set] = {}
+        far: set = set()
         new_set = set(new_ids.tolist())
         for f in new_set:
             tf = tri.tri[f]
@@ -264,12 +293,15 @@ class TransportPlan:
                     tg = tri.tri[g]
                     a = next(u for u in tg if u not in tf)
                     if a not in full:
+                        far.add(a)
                         x, y = (u for u in tg if u != a)
-                        links.setdefault(a, set()).add(edge_key(x, y))
+                        key = edge_key(x, y)
+                        if key not in kept:
+                            links.setdefault(a, set()).add(key)
         touched = full | set(links)
         moved = cand.moved is not None
         if not moved:
             touched.discard(plan.source)  # removed by the collapse
         dirty = frozenset(v for v in touched if tri.alive[v] and not tri.pinned[v])
         return Change(plan.source, plan.target, plan.ring, moved, frozenset(touched),
-                      {v: frozenset(k) for v, k in links.items()}, dirty)
+                      {v: frozenset(k) for v, k in links.items()}, dirty, frozenset(far - touched))

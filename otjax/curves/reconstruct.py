@@ -270,7 +270,7 @@ def _final_relocations(engine: CurveEngine, tolerance: float | None, passes: int
     veto = within_tolerance(tolerance) if tolerance is not None else None
     moved = 0
     for _ in range(passes):
-        _, m = relocate(engine, engine.live_sources(), veto)
+        m = relocate(engine, engine.live_sources(), veto).moved
         moved += m
         if m == 0:
             break

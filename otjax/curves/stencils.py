@@ -201,6 +201,28 @@ class StencilCache:
         self._regions.pop(v, None)
         self._plans.pop(v, None)
 
+    def changed_plans(self, change) -> list[int]:
+        """The vertices of ``change.quiet`` that must be scored again after
+        all: a collapse onto a neighbour whose star the change altered gained
+        or lost the link condition, or has no plan at hand to tell."""
+        tri = self.plan.tri
+        changed_stars = {*change.ring, change.target}
+        star_version = self.log.star_version
+        woke = []
+        for a in sorted(change.quiet):
+            if not self.collapsible_source(a):
+                continue
+            plans = self._plans.get(a, {})
+            for x in tri.star(a)[0]:
+                if x not in changed_stars:
+                    continue
+                hit = plans.get(x)
+                if hit is None or hit.source_stamp != star_version[a] or (
+                        hit.flips is not None and (hit.plan is not None) != link_condition(tri, x, hit.flips)):
+                    woke.append(a)
+                    break
+        return woke
+
     def collapse_plan(self, source: int, target: int) -> CollapsePlan | None:
         """The collapse plan of a half-edge, cached until the star of either end changes.
 

@@ -49,7 +49,10 @@ class Engine(Protocol):
     the admissible ones (with ``cheapest_only``, it may leave out those it
     can show are not the cheapest); ``take`` returns opaque scored candidates that
     ``apply(*taken)`` applies, returning a change with ``dirty`` (vertices to
-    score again) and ``ring`` (the source's one-ring). ``propose_moves``
+    score again), ``ring`` (the source's one-ring) and optionally ``quiet``
+    (vertices whose scores the change left as they were although a coarser
+    rule would call them dirty: their versions did not change, and the loop
+    enters their scores again beside the dirty ones', in the same order). ``propose_moves``
     returns ``[(vertex, delta, scored)]`` for :func:`otjax.decimation.relocation.relocate`.
     """
 
@@ -116,6 +119,8 @@ class Run:
       veto: optional ``(candidate, cost) -> bool`` filter of admissible changes.
       stats: the loop's counters.
       on_collapse: called after each collapse (a progress bar).
+      quiet: vertices the changes since the last scoring left quiet (see
+        :class:`Engine`), entered again by the next :func:`score`.
     """
 
     engine: Engine
@@ -127,6 +132,7 @@ class Run:
     veto: Callable | None
     stats: DecimationStats
     on_collapse: Callable[[], None] | None = None
+    quiet: set = field(default_factory=set)
 
     def relocating(self) -> bool:
         return self.relocate_last > 0 and self.known_end and len(self.live) - self.target < self.relocate_last
@@ -154,16 +160,26 @@ def score(run: Run, sources, targets=None, *, keep: bool = True, while_waiting=N
     ``cheapest_only``, the engine may leave out those that cannot be the cheapest)."""
     entries = run.engine.score(sources, targets, veto=run.veto, keep=keep, while_waiting=while_waiting,
                                cheapest_only=cheapest_only)
+    quiet, run.quiet = run.quiet, set()
+    if run.table.use_heap and targets is None:
+        # Their scores go on the heap again with the fresh ones, in the order a
+        # scoring of every source would give, so exact ties pop the same way.
+        quiet = sorted(v for v in quiet.difference(sources) if v in run.live)
+        table = run.table
+        entries = entries + [(k, table.delta(k)) for v in quiet for k in ((v, w) for w in run.engine.ring(v))
+                             if table.fresh(k)]
+        sources = [*sources, *quiet]
     run.table.enter(entries, _rank(run, sources) if run.table.use_heap else None)
 
 
 def relocate(run: Run, vertices) -> set[int]:
     """Relocates ``vertices`` (the live ones); returns the vertices it made dirty."""
     t0 = time.perf_counter()
-    dirty, moved = relocate_rounds(run.engine, sorted(v for v in vertices if v in run.live), run.veto)
-    run.stats.relocations += moved
+    moves = relocate_rounds(run.engine, sorted(v for v in vertices if v in run.live), run.veto)
+    run.stats.relocations += moves.moved
     run.stats.seconds["relocate"] += time.perf_counter() - t0
-    return set(dirty)
+    run.quiet |= moves.quiet
+    return set(moves.dirty)
 
 
 def collapse(run: Run, key, taken=None, relocate_ring: bool = True) -> tuple[set[int], tuple[int, ...]]:
@@ -175,6 +191,7 @@ def collapse(run: Run, key, taken=None, relocate_ring: bool = True) -> tuple[set
     t0 = time.perf_counter()
     change = run.engine.apply(*taken)
     run.stats.seconds["apply"] += time.perf_counter() - t0
+    run.quiet |= getattr(change, "quiet", frozenset())
     run.stats.collapses += 1
     run.live.remove(key[0])
     dirty = set(change.dirty)
@@ -274,7 +291,8 @@ def run_parallel(run: Run, round_fraction: float) -> None:
         if run.relocating():
             dirty |= relocate(run, rings)
         for key in deferred:
-            if table.fresh(key) and key[0] in live:
+            # A quiet source's scores are entered again with the dirty ones'.
+            if table.fresh(key) and key[0] in live and key[0] not in run.quiet:
                 table.push(key)
         score(run, {v for v in dirty if v in live}, keep=False)
         run.stats.rounds += 1

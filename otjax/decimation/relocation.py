@@ -2,12 +2,22 @@
 
 from __future__ import annotations
 
-from typing import Callable
+from typing import Callable, NamedTuple
 
 import numpy as np
 
 
-def relocate(engine, vertices, veto: Callable | None = None) -> tuple[set[int], int]:
+class Moves(NamedTuple):
+    """What a pass of :func:`relocate` did: ``dirty`` vertices (their stencils
+    changed), ``quiet`` ones (next to a move, nothing of theirs changed:
+    the engine's ``quiet``, less ``dirty``) and how many vertices ``moved``."""
+
+    dirty: set
+    quiet: set
+    moved: int
+
+
+def relocate(engine, vertices, veto: Callable | None = None) -> Moves:
     """One pass over ``vertices``, in order: each moves where its engine
     proposes if the engine's gain for that move is negative.
 
@@ -22,16 +32,17 @@ def relocate(engine, vertices, veto: Callable | None = None) -> tuple[set[int], 
     Args:
       engine: gives ``movable(v)``, ``propose_moves(vertices) -> [(vertex,
         gain, scored)]`` (scored against the current state) and
-        ``apply(*scored)`` returning a change with ``dirty``.
+        ``apply(*scored)`` returning a change with ``dirty`` (and optionally
+        ``quiet``).
       vertices: vertex ids (duplicates and immovable ones are skipped).
       veto: optional ``(*scored) -> bool`` admissibility filter.
 
     Returns:
-      ``(dirty, moved)``: vertices whose stencils the moves changed, and how
-      many vertices moved.
+      :class:`Moves`.
     """
     waiting = [v for v in dict.fromkeys(vertices) if engine.movable(v)]
     dirty: set[int] = set()
+    quiet: set[int] = set()
     moved = 0
     while waiting:
         chunk = _independent_prefix(engine, waiting)
@@ -45,11 +56,16 @@ def relocate(engine, vertices, veto: Callable | None = None) -> tuple[set[int], 
             gain, scored = proposals.get(v, (0.0, None))
             if not gain < 0 or (veto is not None and not veto(*scored)):
                 continue
-            changed |= engine.apply(*scored).dirty
+            change = engine.apply(*scored)
+            # A quiet vertex ends the prefix too: its proposal is made again,
+            # on the state the move left, as a dirty one's is.
+            near = getattr(change, "quiet", frozenset())
+            changed |= change.dirty | near
+            dirty |= change.dirty
+            quiet |= near
             moved += 1
-        dirty |= changed
         waiting = waiting[done:]
-    return dirty, moved
+    return Moves(dirty, quiet - dirty, moved)
 
 
 def _independent_prefix(engine, waiting: list[int]) -> list[int]:

@@ -222,7 +222,7 @@ def _final_passes(engine: SurfaceEngine, passes: int) -> int:
     one moves none; the number of moves."""
     total = 0
     for _ in range(passes):
-        moved = relocate(engine, engine.live_sources())[1]
+        moved = relocate(engine, engine.live_sources()).moved
         total += moved
         if moved == 0:
             break

@@ -205,7 +205,7 @@ def test_relocation_after_every_collapse_is_the_same_batched_or_not(seed):
         assert sa.relocations == sb.relocations > 0
         # A pass over every vertex, batched, against visiting them one by one.
         vertices = a.live_sources()
-        _, moved = relocate(a, vertices)
+        moved = relocate(a, vertices).moved
         for v in vertices:
             relocate(b, [v])
     assert a.scorer.calls < b.scorer.calls  # the batched side did share calls

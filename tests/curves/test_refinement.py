@@ -28,7 +28,7 @@ def test_relocation_lowers_the_cost_and_reports_what_it_touched():
     before = engine.total_cost()
     xy = engine.plan.tri.xy.copy()
     vertices = free_vertices(engine)
-    dirty, moved = relocate(engine, vertices)
+    dirty, _, moved = relocate(engine, vertices)
     assert 0 < moved <= len(vertices)
     after = engine.total_cost()
     assert after < before
@@ -39,7 +39,7 @@ def test_relocation_lowers_the_cost_and_reports_what_it_touched():
     # A veto that rejects every move moves nothing.
     xy = engine.plan.tri.xy.copy()
     seen = []
-    dirty, moved = relocate(engine, free_vertices(engine), lambda cand, cost: seen.append(cand) or False)
+    dirty, _, moved = relocate(engine, free_vertices(engine), lambda cand, cost: seen.append(cand) or False)
     assert (dirty, moved) == (set(), 0)
     assert seen and all(c.moved is not None for c in seen)
     np.testing.assert_array_equal(engine.plan.tri.xy, xy)

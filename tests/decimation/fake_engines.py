@@ -40,6 +40,7 @@ class FakeChange(NamedTuple):
 
     dirty: frozenset
     ring: tuple[int, ...]
+    quiet: frozenset = frozenset()
 
 
 CENTRE = (0.5, 0.5)
@@ -56,6 +57,9 @@ class CycleEngine:
         would most likely take next (the cheapest live one outside the ring)
         fifty-fold and bump its version: a fresh score becomes stale.
       report_meddled: also report that vertex as dirty (to be re-scored).
+      beyond: what to make of the vertex beyond each end of a change's ring
+        (its score did not change): ``None`` nothing, ``"dirty"`` bump its
+        version and report it dirty, ``"quiet"`` report it quiet.
 
     Costs: ``delta(v, w) = weight[v] * (area(prev, v, next) + |v w| / 10)``,
     positive and, for random positions, without ties. A move sends ``v``
@@ -64,7 +68,8 @@ class CycleEngine:
     oracle apply moves through :meth:`apply`.
     """
 
-    def __init__(self, xy, pinned=(), degree_bound: int = 2, meddle: bool = False, report_meddled: bool = True):
+    def __init__(self, xy, pinned=(), degree_bound: int = 2, meddle: bool = False, report_meddled: bool = True,
+                 beyond: str | None = None):
         self.xy = [tuple(map(float, p)) for p in xy]
         n = len(self.xy)
         self.nxt = {v: (v + 1) % n for v in range(n)}
@@ -73,9 +78,13 @@ class CycleEngine:
         self.pinned = frozenset(pinned)
         self.weight = [1.0] * n
         self.versions = [0] * n  # mutated in place: the score table holds this list
+        # The oldest version whose scores still hold: a "dirty" bump beyond a
+        # ring changes a version, not a cost.
+        self.valid_from = [0] * n
         self.degree_bound = degree_bound
         self.meddle = meddle
         self.report_meddled = report_meddled
+        self.beyond = beyond
         self.scored: dict[Collapse, tuple[float, int]] = {}  # latest score of each half-edge, and its version
         self.events: list[tuple] = []  # ("collapse", v, w) and ("move", v), in order
         self.score_calls: list[list[int]] = []  # the sources of each score call
@@ -165,13 +174,14 @@ class CycleEngine:
             return self._move(cand)
         v, w = cand
         assert v in self.alive and v not in self.pinned and w in self.ring(v), f"not a half-edge: {cand}"
-        assert scored_at == self.versions[v], f"stale score applied: {cand} scored at {scored_at}, now {self.versions[v]}"
+        assert scored_at is not None and self.valid_from[v] <= scored_at <= self.versions[v], (
+            f"stale score applied: {cand} scored at {scored_at}, now {self.versions[v]}")
         assert cost == self.delta(v, w), f"the score of {cand} is not its cost"
         p, q = self.prv[v], self.nxt[v]
         self.nxt[p], self.prv[q] = q, p
         self.alive.remove(v)
-        self.versions[p] += 1
-        self.versions[q] += 1
+        self._bump(p)
+        self._bump(q)
         dirty = {u for u in (p, q) if self.free(u)}
         self.events.append(("collapse", v, w))
         self.rings[v] = (p, q)
@@ -179,7 +189,22 @@ class CycleEngine:
             u = self._meddle(exclude={p, q})
             if u is not None and self.report_meddled:
                 dirty.add(u)
-        return FakeChange(frozenset(dirty), (p, q))
+        return self._change(dirty, (p, q), {self.prv[p], self.nxt[q]} - {p, q})
+
+    def _bump(self, u: int) -> None:
+        """A change of ``u``'s cost: its older scores are stale."""
+        self.versions[u] += 1
+        self.valid_from[u] = self.versions[u]
+
+    def _change(self, dirty: set, ring: tuple, beyond: set) -> FakeChange:
+        """The change of ``dirty`` and ``ring``, with the vertices ``beyond``
+        the ring (their scores unchanged) made of as :attr:`beyond` says."""
+        beyond = {u for u in beyond if self.free(u)} - dirty
+        if self.beyond == "dirty":
+            for u in beyond:
+                self.versions[u] += 1
+            return FakeChange(frozenset(dirty | beyond), ring)
+        return FakeChange(frozenset(dirty), ring, frozenset(beyond) if self.beyond == "quiet" else frozenset())
 
     def _meddle(self, exclude) -> int | None:
         options = [(d, k) for d, k in self.eligible() if k[0] not in exclude]
@@ -190,7 +215,7 @@ class CycleEngine:
         fresh = [d for d, k in self.eligible() if k[0] != u]
         self.traps += not fresh or stale < min(fresh)
         self.weight[u] *= 50.0
-        self.versions[u] += 1
+        self._bump(u)
         self.meddled.append((len(self.rings) - 1, u))
         return u
 
@@ -200,9 +225,10 @@ class CycleEngine:
         self.xy[v] = move.position
         touched = (v, self.prv[v], self.nxt[v])
         for u in touched:
-            self.versions[u] += 1
+            self._bump(u)
         self.events.append(("move", v))
-        return FakeChange(frozenset(u for u in touched if self.free(u)), self.ring(v))
+        return self._change({u for u in touched if self.free(u)}, self.ring(v),
+                            {self.prv[self.prv[v]], self.nxt[self.nxt[v]]} - set(touched))
 
     def propose_moves(self, vertices) -> list:
         """``[(vertex, delta, scored)]``: each vertex's move, always a gain

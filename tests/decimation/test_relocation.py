@@ -89,7 +89,7 @@ def test_a_pass_is_the_sequential_visit_in_order(x, data):
     vertices = data.draw(st.lists(st.integers(-1, n), max_size=2 * n))  # duplicates, ends, out of range
     vetoed = data.draw(st.sets(st.integers(0, n - 1), max_size=3))
     engine = PathMover(x, pinned, content)
-    dirty, moved = relocate(engine, vertices, lambda move, gain: move.vertex not in vetoed)
+    dirty, _, moved = relocate(engine, vertices, lambda move, gain: move.vertex not in vetoed)
     want_x, want_order = sequential(x, pinned, content, vertices, vetoed)
     applied = [v for r in engine.applied for v, _ in r]
     assert engine.x == want_x  # bitwise: same proposals on the same states
@@ -107,14 +107,14 @@ def test_a_pass_is_the_sequential_visit_in_order(x, data):
 
 def test_far_apart_vertices_share_one_call():
     engine = PathMover([0.0, 0.0, 1.0, 5.0, 0.0, 0.0, 3.0, 0.0, 0.0, 2.0, 0.0, 0.0])
-    dirty, moved = relocate(engine, [3, 6, 9, 1])
+    dirty, _, moved = relocate(engine, [3, 6, 9, 1])
     assert engine.rounds == [[3, 6, 9], [1]] and moved == 4  # 1 is two edges from 3
 
 
 def test_neighbours_wait_for_the_move_before_them():
     engine = PathMover([0.0, 1.0, 5.0, 0.0, 0.0])
     seen = []
-    dirty, moved = relocate(engine, [1, 2, 3], lambda m, g: seen.append(m.vertex) or m.vertex != 1)
+    dirty, _, moved = relocate(engine, [1, 2, 3], lambda m, g: seen.append(m.vertex) or m.vertex != 1)
     assert engine.rounds == [[1], [2], [3]]  # each within two edges of the one before
     assert [v for r in engine.applied for v, _ in r] == [2, 3] and moved == 2
     assert seen == [1, 2, 3] and dirty == {1, 2, 3}
@@ -122,7 +122,7 @@ def test_neighbours_wait_for_the_move_before_them():
 
 def test_nothing_to_move():
     engine = PathMover([0.0, 0.0, 0.0, 0.0])
-    assert relocate(engine, []) == (set(), 0) and engine.rounds == []
-    assert relocate(engine, [0, 3, 9]) == (set(), 0) and engine.rounds == []  # immovable only
+    assert relocate(engine, []) == (set(), set(), 0) and engine.rounds == []
+    assert relocate(engine, [0, 3, 9]) == (set(), set(), 0) and engine.rounds == []  # immovable only
     # Already in place: no gain, nothing moves, one call (1 and 2 are neighbours: two).
-    assert relocate(engine, [1, 2]) == (set(), 0) and engine.rounds == [[1], [2]]
+    assert relocate(engine, [1, 2]) == (set(), set(), 0) and engine.rounds == [[1], [2]]
