@@ -207,7 +207,9 @@ def run_exhaustive(run: Run) -> None:
     if len(run.live) <= run.target:
         return
     run.table.use_heap = True
-    score(run, run.live.ids, keep=False)
+    # Kept too (within the engine's memory bound): a winner is often a
+    # collapse nothing near it changed since this first scoring.
+    score(run, run.live.ids, keep=True)
     while len(run.live) > run.target:
         key = run.table.pop(run.live.__contains__)
         if key is None:
