@@ -278,8 +278,9 @@ class TransportPlan:
         """The vertices of the new triangles and of the triangles next to
         them: every vertex whose star, faces across its link, their points
         or its star's edge costs changed. The far vertex of a face across
-        the region's boundary keeps its star: only the points across that
-        link edge changed (``links``)."""
+        the region's boundary keeps its star: at most the points across that
+        link edge and its cost changed (``links``); where neither did on any
+        of the edges ``kept`` it shares with the region, it is quiet."""
         plan = cand.plan
         tri = self.tri
         full = {*plan.ring, plan.source}
