@@ -23,7 +23,6 @@ from typing import NamedTuple
 import numpy as np
 
 from otjax.batch.pipeline import pipelined
-from otjax.curves import scoring
 from otjax.curves.batches import located_batches, packed_batches
 from otjax.curves.export import Stencils, export_jobs
 from otjax.curves.host_batch import HostBatch
@@ -295,18 +294,19 @@ class CurveEngine:
         """Distinct kernel shapes used (scoring and location kernels)."""
         return self.scorer.compiled_shapes
 
-    def exports(self, sources, targets: dict | None = None, budget: int = scoring.ROW_BUDGET, extra=()):
+    def exports(self, sources, targets: dict | None = None, budget: int | None = None, extra=()):
         """:func:`~otjax.curves.batches.packed_batches` of the half-edges
-        leaving ``sources`` (then the jobs ``extra``)."""
+        leaving ``sources`` (then the jobs ``extra``), ``budget`` rows a call
+        (default: the scorer's ``row_budget``)."""
         def jobs():  # listed at the first batch: the time it takes counts as the batches'
             yield from self.stencils.collapse_jobs(sources, targets)
             yield from extra
 
-        return packed_batches(jobs(), self.plan, budget)
+        return packed_batches(jobs(), self.plan, budget or self.scorer.row_budget)
 
-    def relocation_exports(self, moves, budget: int = scoring.ROW_BUDGET):
+    def relocation_exports(self, moves, budget: int | None = None):
         """:meth:`exports` for ``(v, position)`` moves (those that keep the embedding)."""
-        return packed_batches(self.stencils.move_jobs(moves), self.plan, budget)
+        return packed_batches(self.stencils.move_jobs(moves), self.plan, budget or self.scorer.row_budget)
 
     def export(self, sources, targets: dict | None = None) -> HostBatch:
         """The half-edges leaving ``sources`` as one flat batch, left for the kernel to locate."""
@@ -337,9 +337,9 @@ class CurveEngine:
         return out[0] if out else None
 
     def score_candidates(self, cands: list[CandidateStencil]) -> tuple[np.ndarray, list[CandidateCost]]:
-        """``(delta, costs)`` of located candidates, in batches of about
-        :data:`~otjax.curves.scoring.ROW_BUDGET` rows."""
-        _, delta, costs = self.score_batches(located_batches(cands))
+        """``(delta, costs)`` of located candidates, in batches of about the
+        scorer's ``row_budget`` rows."""
+        _, delta, costs = self.score_batches(located_batches(cands, self.scorer.row_budget))
         return delta, costs
 
     def score_batches(self, batches):

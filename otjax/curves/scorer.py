@@ -39,7 +39,8 @@ class Scorer:
       dtype: float dtype of the cost arithmetic (location is float64 whatever
         this is).
 
-    Which rows the kernel locates changes no score: a located row is the
+    ``row_budget``: the rows its calls are filled to (:func:`~otjax.curves.scoring.row_budget`
+    of the number of points). Which rows the kernel locates changes no score: a located row is the
     exact perturbed location wherever it is found.
     """
 
@@ -48,6 +49,7 @@ class Scorer:
         self.mass = mass
         self.point_rows = np.ascontiguousarray(points.T)
         self.pipeline = KernelPipeline(scoring.FIELDS, scoring.score_packed, scoring.SHAPES, dtype)
+        self.row_budget = scoring.row_budget(len(points))
         self.location_kernel_used = False
         # Locate batches on the host before their call (see PROBE).
         self.host_first = False
@@ -143,19 +145,20 @@ class Scorer:
         order = np.argsort(np.concatenate(seqs), kind="stable")
         return [cands[i] for i in order], delta[order], [costs[i] for i in order]
 
-    def edge_costs(self, parts, edge_xy: np.ndarray, budget: int = scoring.ROW_BUDGET) -> np.ndarray:
+    def edge_costs(self, parts, edge_xy: np.ndarray, budget: int | None = None) -> np.ndarray:
         """Costs of edges given with their points.
 
         Args:
           parts: per edge, a tuple of point-id arrays (concatenated in order).
           edge_xy: ``(m, 2, 2)`` endpoints of each edge, lower id first.
           budget: rows per call (whole edges per batch, within the shapes the
-            decimation loop uses anyway); each batch is dispatched before the
-            last is read.
+            decimation loop uses anyway; default :attr:`row_budget`); each
+            batch is dispatched before the last is read.
 
         Returns:
           ``(m, 6)`` the kernel's per-edge fields (:data:`scoring.EDGE_FIELDS`).
         """
+        budget = budget or self.row_budget
         counts = np.fromiter((sum(map(len, p)) for p in parts), np.int64, len(parts))
 
         def batches():

@@ -54,6 +54,9 @@ MIN_ROWS = 1 << 12
 ROW_BUDGET = 1 << 15
 # The compiled shapes: TINY_ROWS, MIN_ROWS and ROW_BUDGET, above that a capacity class.
 SHAPES = ShapePolicy(MIN_ROWS, ROW_BUDGET, TINY_ROWS)
+# Inputs of at most this many points fill their calls to MIN_ROWS only
+# (docs/decisions.md#small_input_rows).
+SMALL_INPUT_POINTS = 20_000
 EDGES_PER_ROW = 4  # E = T = R / 4
 JOBS_PER_ROW = 16  # J = R / 16
 RETRY_PER_ROW = 4  # rows whose guess fails: at most R / 4 get the second test
@@ -138,6 +141,20 @@ def capacity(rows: int, edges: int, triangles: int, jobs: int) -> int:
     if r > THREE_QUARTER_FROM and need <= 3 * r // 4:
         return 3 * r // 4
     return r
+
+
+def row_budget(n_points: int) -> int:
+    """Rows the calls of a run on ``n_points`` input points are filled to:
+    :data:`MIN_ROWS` up to :data:`SMALL_INPUT_POINTS`, else :data:`ROW_BUDGET`.
+
+    A small run then never compiles (or, with the compilation cache, traces
+    and loads) the :data:`ROW_BUDGET` shape unless one candidate needs it.
+
+    Example:
+      >>> row_budget(3000) == MIN_ROWS, row_budget(50_000) == ROW_BUDGET
+      (True, True)
+    """
+    return MIN_ROWS if n_points <= SMALL_INPUT_POINTS else ROW_BUDGET
 
 
 def _pad_job(r: int) -> int:

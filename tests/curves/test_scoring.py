@@ -320,3 +320,20 @@ def test_compiled_shapes_stay_few_over_2000_collapses():
     assert len(shapes) <= 12
     assert engine.scorer.calls >= calls + 2000  # one call at least per scoring
     assert engine.compiled_shapes in (len(shapes), len(shapes) + 1)  # + the location kernel, if used
+
+
+def test_small_inputs_fill_calls_to_the_smaller_shape_and_score_the_same(monkeypatch):
+    """Up to SMALL_INPUT_POINTS points, calls are filled to MIN_ROWS rows
+    (more calls than at ROW_BUDGET); the reconstruction is the same bit for bit."""
+    from otjax import datasets, reconstruct_curve
+
+    assert [scoring.row_budget(n) for n in (10, scoring.SMALL_INPUT_POINTS, scoring.SMALL_INPUT_POINTS + 1)] == [
+        scoring.MIN_ROWS, scoring.MIN_ROWS, scoring.ROW_BUDGET]
+    pts, _ = datasets.star(900, noise=0.01, seed=3)
+    small = reconstruct_curve(pts, n_vertices=10, seed=1)
+    monkeypatch.setattr(scoring, "SMALL_INPUT_POINTS", 0)
+    large = reconstruct_curve(pts, n_vertices=10, seed=1)
+    assert small.history["kernel_calls"] > large.history["kernel_calls"]  # the budgets did differ
+    np.testing.assert_array_equal(small.vertices, large.vertices)
+    np.testing.assert_array_equal(small.edges, large.edges)
+    assert small.total_cost == large.total_cost
