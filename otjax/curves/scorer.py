@@ -39,8 +39,10 @@ class Scorer:
       dtype: float dtype of the cost arithmetic (location is float64 whatever
         this is).
 
-    ``row_budget``: the rows its calls are filled to (:func:`~otjax.curves.scoring.row_budget`
-    of the number of points). Which rows the kernel locates changes no score: a located row is the
+    Its calls are filled to ``row_budget`` rows
+    (:func:`~otjax.curves.scoring.row_budget` of the number of points).
+
+    Which rows the kernel locates changes no score: a located row is the
     exact perturbed location wherever it is found.
     """
 

@@ -16,6 +16,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from otjax import datasets, reconstruct_curve
 from otjax.batch.fields import PackedBuffers
 from otjax.curves import scorer as scorer_module
 from otjax.curves import scoring
@@ -325,8 +326,6 @@ def test_compiled_shapes_stay_few_over_2000_collapses():
 def test_small_inputs_fill_calls_to_the_smaller_shape_and_score_the_same(monkeypatch):
     """Up to SMALL_INPUT_POINTS points, calls are filled to MIN_ROWS rows
     (more calls than at ROW_BUDGET); the reconstruction is the same bit for bit."""
-    from otjax import datasets, reconstruct_curve
-
     assert [scoring.row_budget(n) for n in (10, scoring.SMALL_INPUT_POINTS, scoring.SMALL_INPUT_POINTS + 1)] == [
         scoring.MIN_ROWS, scoring.MIN_ROWS, scoring.ROW_BUDGET]
     pts, _ = datasets.star(900, noise=0.01, seed=3)
