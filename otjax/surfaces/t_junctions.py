@@ -168,7 +168,9 @@ def _split(plan: SurfacePlan, j: TJunction) -> None:
     change = plan.complex.split_edge(j.a, j.b, j.v)
     plan.ensure_bins(change.added_triangles)
     ab = x[j.b] - x[j.a]
-    at = float((x[j.v] - x[j.a]) @ ab / (ab @ ab))  # where v falls along ab
+    # Where v falls along ab; where a and b coincide (and v with them) any
+    # fraction names the same place.
+    at = float((x[j.v] - x[j.a]) @ ab / (ab @ ab)) if ab @ ab > 0 else 0.5
     for t in change.removed_triangles:
         e = plan.facet_entries.pop(t, None)
         if e is None:

@@ -5,7 +5,7 @@ from itertools import combinations
 
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, assume, given, settings
+from hypothesis import HealthCheck, assume, example, given, settings
 from hypothesis import strategies as st
 
 from otjax.metrics3d import crease_error, edge_sharpness
@@ -193,6 +193,7 @@ def widest_cosine(x: np.ndarray, t) -> float:
 @settings(max_examples=100, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(st.integers(0, 2**31 - 1), st.integers(5, 14), st.floats(0.3, 1.0), st.floats(0.05, 0.95),
        st.integers(1, 3))
+@example(45392429, 5, 0.5, 0.5, 3)  # three corners moved onto one point: a sliver with a zero-length edge
 def test_splitting_slivers_keeps_the_plan_feasible_and_leaves_only_four_on_a_line(seed, n, keep, at, flat):
     c = delaunay_complex(seed, n, keep)
     tris = c.triangle_array()
