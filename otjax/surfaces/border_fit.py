@@ -68,8 +68,8 @@ def fit_border(vertices, triangles, points, flat_angle: float = FLAT_ANGLE,
     moves along ``out`` to where their ``(p - v).out`` end
     (:func:`~otjax.surfaces.fit_input.uniform_end`: past the largest by
     their mean spacing, or the quantile that stands for it in the points'
-    ``noise``; outward, or inward where the points end before it, but by
-    at most ``L / 2``: the vertex stays where they end further in).
+    ``noise``; outward, or inward where the points end before it; inward
+    by at most ``L / 2``: the vertex stays where they end further in).
     A vertex of exactly two border edges less than :data:`CORNER_ANGLE`
     apart in that plane, its facets' centre between them and their normals
     within :data:`CORNER_FLAT_ANGLE` of one another, is a corner:
