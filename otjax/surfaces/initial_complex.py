@@ -6,8 +6,10 @@ subsets still have a well-defined 3D Delaunay triangulation; the corners
 carry no points and lose their facets in the filter). Every point is sent to
 its nearest vertex, the plan is relaxed over two-tetrahedra stencils (a facet,
 the other facets of the tetrahedra on each side, their vertices), and the
-facets that received mass make the complex; vertices that carry mass without
-a kept facet stay as isolated vertices (the paper's garbage collectors).
+facets that received mass make the complex. A vertex that carries mass
+without a kept facet keeps one edge, to its nearest Delaunay neighbour on a
+kept facet (docs/decisions.md#tethers): it may hold its points (the paper's
+garbage collectors), but the decimation can collapse it like any other.
 """
 
 from __future__ import annotations
@@ -168,14 +170,35 @@ def initial_settings(points: np.ndarray, seed: int = 0, density: float = DEFAULT
                        min_bins=MIN_BINS, seed=seed, max_stretch=MAX_STRETCH, bin_length=BIN_LENGTH)
 
 
+def _tethers(full: SimplicialComplex, vertices: np.ndarray, loose, used: set, on_facets: set) -> list:
+    """``[(v, w)]``: a Delaunay edge of ``full`` from each vertex ``v`` of
+    ``loose`` (kept for its own mass, on no kept facet) to its nearest
+    neighbour ``w`` in ``used``, on a kept facet if one is (ties: the lower
+    id). Without an edge such a vertex has no half-edge, so the decimation
+    could never remove it and it would hold a place of the vertex budget
+    to the end."""
+    out = []
+    for v in loose:
+        near = [w for w in full.neighbors(v) if w in used]
+        best = [w for w in near if w in on_facets] or near
+        if best:
+            d = np.linalg.norm(vertices[best] - vertices[v], axis=1)
+            out.append((v, best[int(np.argmin(d))]))
+    return out
+
+
 def _kept(plan: SurfacePlan, vertices: np.ndarray, subset: np.ndarray) -> tuple[SurfacePlan, np.ndarray]:
     """The plan moved onto the complex of the facets that carry mass and
-    the vertices that carry mass or belong to such a facet (renumbered)."""
+    the vertices that carry mass or belong to such a facet (renumbered),
+    with the tethers of :func:`_tethers`."""
     facets = sorted(plan.facet_entries)
-    used = sorted({v for t in facets for v in t} | set(plan.vertex_entries))
+    on_facets = {v for t in facets for v in t}
+    used = sorted(on_facets | set(plan.vertex_entries))
     row = {v: i for i, v in enumerate(used)}
+    tethers = _tethers(plan.complex, vertices, [v for v in used if v not in on_facets], set(used), on_facets)
     complex_ = SimplicialComplex(vertices[used], np.array([[row[v] for v in t] for t in facets],
-                                                          np.int64).reshape(-1, 3))
+                                                          np.int64).reshape(-1, 3),
+                                 np.array([[row[a], row[b]] for a, b in tethers], np.int64).reshape(-1, 2))
     new = SurfacePlan.from_entries(
         complex_, plan.points, plan.masses, plan.settings,
         bins={tuple(row[v] for v in t): plan.bins[t] for t in facets},

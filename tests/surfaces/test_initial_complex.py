@@ -82,6 +82,29 @@ def test_every_point_is_transported_and_only_facets_with_mass_are_kept(cross):
     assert ic.delaunay_facets > 3 * plan.complex.n_triangles
 
 
+def test_a_vertex_kept_for_its_own_mass_alone_is_tethered_so_it_can_be_collapsed():
+    """A vertex that carries mass but lies on no kept facet keeps one edge,
+    to a vertex of a kept facet: without it the decimation could never
+    remove the vertex, and it would hold a place of the vertex budget."""
+    from otjax import datasets3d
+    from otjax.frame import to_canonical
+
+    tethered = 0
+    for n, seed in ((400, 0), (400, 2), (800, 3)):
+        _, q, m = to_canonical(datasets3d.crossing(n, seed=seed)[0], np.ones(n))
+        plan = initial_complex(q, m, exact_solver, seed=seed).plan
+        c = plan.complex
+        on_facets = {v for t in c.triangles for v in t}
+        for v in np.flatnonzero(c.alive).tolist():
+            if v in on_facets:
+                continue
+            assert plan.simplex_mass(v) > 0
+            (w,) = c.neighbors(v)
+            assert w in on_facets and not c.edge_triangles(v, w)
+            tethered += 1
+    assert tethered > 0  # these inputs have such vertices
+
+
 def test_crossing_planes_are_both_covered_by_facets_near_them(cross):
     pts, ic = cross
     arrays = ic.plan.complex.to_arrays()
