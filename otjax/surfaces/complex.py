@@ -336,6 +336,22 @@ class SimplicialComplex:
                 added += [h for h in (triangle_key(a, v, c), triangle_key(v, b, c)) if self._add_triangle(h)]
         return SplitChange(e, v, removed, tuple(sorted(added)))
 
+    def remove_triangle(self, t: Triangle) -> tuple[Edge, ...]:
+        """Removes triangle ``t`` and those of its edges no other triangle
+        has; returns the edges removed (its vertices stay, edges or not).
+
+        Raises:
+          KeyError: ``t`` is not in the complex.
+        """
+        t = triangle_key(*t)
+        if t not in self.triangles:
+            raise KeyError(f"triangle {t} is not in the complex")
+        self._remove_triangle(t)
+        lone = tuple(e for e in triangle_edges(t) if not self.edges[e])
+        for e in lone:
+            self._remove_edge(e)
+        return lone
+
     def move(self, v: int, position: np.ndarray) -> None:
         """Sets the position of live vertex ``v`` (topology is unchanged)."""
         if not self.alive[v]:

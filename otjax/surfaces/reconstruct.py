@@ -24,6 +24,7 @@ from otjax.decimation.relocation import relocate
 from otjax.frame import to_canonical
 from otjax.surfaces.bins import DEFAULT_DENSITY, facet_areas
 from otjax.surfaces.border_fit import fit_border
+from otjax.surfaces.caps import remove_caps
 from otjax.surfaces.complex import SimplicialComplex
 from otjax.surfaces.crease_fit import fit_creases
 from otjax.surfaces.engine import SurfaceEngine
@@ -263,13 +264,16 @@ def _shape_part(points: np.ndarray, masses: np.ndarray | None, background: str) 
 
 
 def _fit_features(plan: SurfacePlan, points: np.ndarray, fit: bool, method: str) -> int:
-    """With ``fit``, moves the complex's crease vertices and then its flat
-    open-border vertices to the canonical ``points``, removes the facets the
-    moves left lying on a line (:func:`~otjax.surfaces.t_junctions.split_slivers`),
-    then relaxes the transport on the moved complex; the number of vertices
-    moved (docs/decisions.md#feature_fit)."""
+    """With ``fit``, removes the caps across concave corners of the open
+    border (:func:`~otjax.surfaces.caps.remove_caps`), moves the complex's
+    crease vertices and then its flat open-border vertices to the canonical
+    ``points``, removes the facets the moves left lying on a line
+    (:func:`~otjax.surfaces.t_junctions.split_slivers`), then relaxes the
+    transport on the changed complex; the number of vertices moved
+    (docs/decisions.md#feature_fit)."""
     if not fit:
         return 0
+    capped = remove_caps(plan)
     arrays = plan.complex.to_arrays()
     noise = points_noise(points)  # one estimate for both fits
     fitted = fit_creases(arrays.vertices, arrays.triangles, points, noise=noise).vertices
@@ -279,6 +283,7 @@ def _fit_features(plan: SurfacePlan, points: np.ndarray, fit: bool, method: str)
         plan.complex.move(int(arrays.vertex_ids[row]), fitted[row])
     if len(moved):
         split_slivers(plan)
+    if len(moved) or capped:
         relax(plan, LocalSolver(method), max_sweeps=REBIN_SWEEPS)
     return len(moved)
 

@@ -182,7 +182,7 @@ def _split(plan: SurfacePlan, j: TJunction) -> None:
             corner = np.asarray(t)[np.argmin(((pos[:, None] - x[list(t)][None]) ** 2).sum(-1), axis=1)]
             for v in np.unique(corner):
                 pick = corner == v
-                _add(plan.vertex_entries, int(v), e.point[pick], np.zeros(pick.sum(), np.int64), e.mass[pick])
+                add_entries(plan.vertex_entries, int(v), e.point[pick], np.zeros(pick.sum(), np.int64), e.mass[pick])
             continue
         wa, wb = lam[:, t.index(j.a)], lam[:, t.index(j.b)]
         low = wb < at * (wa + wb)  # on a's side of the segment (v, c)
@@ -190,11 +190,11 @@ def _split(plan: SurfacePlan, j: TJunction) -> None:
             key = tuple(sorted(half))
             cap = plan.bins[key].capacity
             k = len(cap)
-            _add(plan.facet_entries, key, np.repeat(e.point[pick], k), np.tile(np.arange(k), int(pick.sum())),
+            add_entries(plan.facet_entries, key, np.repeat(e.point[pick], k), np.tile(np.arange(k), int(pick.sum())),
                  np.outer(e.mass[pick], cap).ravel())
 
 
-def _add(entries: dict, key, point: np.ndarray, bin_: np.ndarray, mass: np.ndarray) -> None:
+def add_entries(entries: dict, key, point: np.ndarray, bin_: np.ndarray, mass: np.ndarray) -> None:
     """Adds entries to ``entries[key]``, summing the mass of repeated (point, bin) pairs."""
     if not len(point):
         return
