@@ -21,10 +21,12 @@ simplicial complex, for research code and notebooks.
   with local re-solves, gradient refinement.
 - :func:`filter_facets`, :func:`facet_density` -- facet filtering by mass
   density (§4.4).
-- :func:`fit_creases`, :func:`fit_border` -- crease vertices moved onto the
-  planes of the points around them, flat open-border vertices out to where
-  the points end (not in the paper; the last step of
-  :func:`reconstruct_surface`, ``fit_features=True``).
+- :func:`find_caps`, :func:`remove_caps`, :func:`fit_creases`,
+  :func:`fit_border` -- facets closing a concave corner of the open border
+  found and removed, crease vertices moved onto the planes of the points
+  around them, flat open-border vertices out to where the points end (not
+  in the paper; the last step of :func:`reconstruct_surface`,
+  ``fit_features=True``).
 - :class:`SurfaceResult` -- a reconstructed surface: arrays, densities,
   ``.save()`` (``.ply``, ``.obj``, ``.off``, ``.json``), ``.plot()``.
 - :func:`recover_features` -- pull a smooth mesh's vertices onto the creases
@@ -39,6 +41,7 @@ The LP layer itself (padded batches, solvers, statuses) is :mod:`otjax.lp`.
 
 from otjax.surfaces.bins import FacetBins, bin_positions, facet_bins
 from otjax.surfaces.border_fit import BorderFit, fit_border
+from otjax.surfaces.caps import find_caps, remove_caps
 from otjax.surfaces.complex import CollapseChange, ComplexArrays, LocalComplex, SimplicialComplex
 from otjax.surfaces.crease_fit import CreaseFit, fit_creases
 from otjax.surfaces.engine import SurfaceEngine
@@ -59,6 +62,7 @@ __all__ = [
     "InitialComplex", "LocalComplex", "LocalSolution", "LocalSolver", "PassStats", "RefineStats", "RelaxationStats",
     "RelocationStats", "SimplicialComplex", "Stencil", "SurfaceEngine", "SurfacePlan", "SurfaceReconstruction",
     "SurfaceResult", "bin_positions",
-    "exact_solver", "facet_bins", "facet_density", "facet_ring", "filter_facets", "fit_border", "fit_creases", "initial_complex",
+    "exact_solver", "facet_bins", "facet_density", "facet_ring", "filter_facets", "find_caps", "fit_border", "fit_creases", "initial_complex",
     "initial_settings", "plan_segments", "plot_complex", "reconstruct_surface", "recover_features", "refine", "relax", "relocate", "relocation_targets",
+    "remove_caps",
 ]
