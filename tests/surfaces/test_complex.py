@@ -79,6 +79,28 @@ def test_delaunay_complexes_stay_valid_under_collapses(c, seed):
 
 
 @SETTINGS
+@given(c=delaunay_complexes, seed=st.integers(0, 2**31 - 1))
+def test_removing_a_triangle_drops_it_and_its_edges_no_other_triangle_has(c, seed):
+    rng = np.random.default_rng(seed)
+    for _ in range(4):
+        if not c.triangles:
+            break
+        t = sorted(c.triangles)[rng.integers(c.n_triangles)]
+        others = c.triangles - {t}
+        edges_before, alive_before = set(c.edges), c.alive.copy()
+        sides = {(t[0], t[1]), (t[0], t[2]), (t[1], t[2])}
+        # an oracle from the triangle list alone: the sides on no other triangle go
+        lone = {e for e in sides if not any(set(e) <= set(u) for u in others)}
+        removed = c.remove_triangle(t)
+        c.check()
+        assert set(removed) == lone and c.triangles == others
+        assert set(c.edges) == edges_before - lone
+        np.testing.assert_array_equal(c.alive, alive_before)
+    with pytest.raises(KeyError):
+        c.remove_triangle((-3, -2, -1))  # no such triangle
+
+
+@SETTINGS
 @given(seed=st.integers(0, 2**31 - 1))
 def test_closed_surface_keeps_euler_characteristic_and_manifoldness(seed):
     c = sphere_complex(seed, 16)
