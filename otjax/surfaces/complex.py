@@ -91,8 +91,7 @@ class ComplexArrays(NamedTuple):
       vertices: ``(V, 3)`` float64 positions of the live vertices.
       vertex_ids: ``(V,)`` int64 id of each row in the complex.
       triangles: ``(T, 3)`` int64 rows into ``vertices``, each row increasing.
-      edges: ``(E, 2)`` int64 rows into ``vertices``, every edge (faces of
-        triangles included), each row increasing.
+      edges: ``(E, 2)`` int64 rows into ``vertices``, every edge (sides of triangles too), rows increasing.
       dangling: ``(E,)`` bool, True for edges of no triangle.
       isolated: ``(I,)`` int64 rows into ``vertices`` of vertices of no edge.
     """
@@ -124,15 +123,12 @@ def triangle_edges(t: Triangle) -> tuple[Edge, Edge, Edge]:
 def replace_vertex(simplex: tuple[int, ...], source: int, target: int) -> tuple[int, ...] | None:
     """The key of ``simplex`` with ``source`` replaced by ``target``; None
     when that repeats ``target`` (the simplex degenerates)."""
-    if target in simplex:
-        return None
-    return tuple(sorted(target if v == source else v for v in simplex))
+    return None if target in simplex else tuple(sorted(target if v == source else v for v in simplex))
 
 
 def closure(edges: Iterable[Edge], triangles: Iterable[Triangle], vertices: Iterable[int] = ()) -> LocalComplex:
     """The smallest complex holding the given simplices: all their faces added."""
-    tris = set(triangles)
-    es = set(edges)
+    tris, es = set(triangles), set(edges)
     for t in tris:
         es.update(triangle_edges(t))
     vs = set(vertices)
@@ -337,12 +333,8 @@ class SimplicialComplex:
         return SplitChange(e, v, removed, tuple(sorted(added)))
 
     def remove_triangle(self, t: Triangle) -> tuple[Edge, ...]:
-        """Removes triangle ``t`` and those of its edges no other triangle
-        has; returns the edges removed (its vertices stay, edges or not).
-
-        Raises:
-          KeyError: ``t`` is not in the complex.
-        """
+        """Removes triangle ``t`` (``KeyError`` if absent) and its edges no other
+        triangle has, which it returns; its vertices stay."""
         t = triangle_key(*t)
         if t not in self.triangles:
             raise KeyError(f"triangle {t} is not in the complex")
