@@ -24,7 +24,7 @@ import numpy as np
 
 from otjax.surfaces.complex import SimplicialComplex, Triangle, triangle_edges
 from otjax.surfaces.plan import SurfacePlan
-from otjax.surfaces.t_junctions import add_entries
+from otjax.surfaces.t_junctions import to_nearest_corners
 
 #: Degrees: every facet on a cap's inner edges stands at more than this from it.
 CAP_ANGLE = 60.0
@@ -81,13 +81,6 @@ def remove_caps(plan: SurfacePlan, angle: float = CAP_ANGLE, density: float = CA
         bins = plan.bins[t]
         entries = plan.drop_facet(t)
         c.remove_triangle(t)
-        if entries is None or not len(entries.point):
-            continue
-        x = c.positions[list(t)]
-        at = bins.barycentric[entries.bin] @ x
-        corner = np.asarray(t)[np.argmin(((at[:, None] - x[None]) ** 2).sum(-1), axis=1)]
-        for v in np.unique(corner).tolist():
-            pick = corner == v
-            add_entries(plan.vertex_entries, v, entries.point[pick], np.zeros(int(pick.sum()), np.int64),
-                        entries.mass[pick])
+        if entries is not None and len(entries.point):
+            to_nearest_corners(plan, t, entries, bins.barycentric[entries.bin])
     return len(caps)

@@ -91,7 +91,7 @@ class ComplexArrays(NamedTuple):
       vertices: ``(V, 3)`` float64 positions of the live vertices.
       vertex_ids: ``(V,)`` int64 id of each row in the complex.
       triangles: ``(T, 3)`` int64 rows into ``vertices``, each row increasing.
-      edges: ``(E, 2)`` int64 rows into ``vertices``, every edge (sides of triangles too), rows increasing.
+      edges: ``(E, 2)`` int64 rows into ``vertices``, every edge (triangles' too), rows increasing.
       dangling: ``(E,)`` bool, True for edges of no triangle.
       isolated: ``(I,)`` int64 rows into ``vertices`` of vertices of no edge.
     """

@@ -138,9 +138,9 @@ def reconstruct_surface(points, masses=None, n_vertices: int = 100, *, queue: st
       final_density_factor: the facets' bins before those passes, in multiples of ``bin_density``, the
         transport relaxed on them (the result's cost is on these; 1: the decimation's): a finer quadrature
         sharpens creases and corners (docs/decisions.md#final_density).
-      fit_features: where no background was found, then drop caps (:func:`~otjax.surfaces.remove_caps`), move
-        crease vertices onto the points' planes (crease ends along them too: :func:`~otjax.surfaces.fit_creases`),
-        flat open-border ones out to the points' end (:func:`~otjax.surfaces.fit_border`), drop flat facets, relax.
+      fit_features: where no background was found, then drop caps (:func:`~otjax.surfaces.remove_caps`),
+        move crease vertices (and ends) onto the points' planes (:func:`~otjax.surfaces.fit_creases`), flat
+        border ones out to the points' end (:func:`~otjax.surfaces.fit_border`), drop flat facets, relax.
       progress: show a progress bar.
 
     Returns:

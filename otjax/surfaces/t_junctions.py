@@ -27,7 +27,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from otjax.surfaces.complex import SimplicialComplex
+from otjax.surfaces.complex import SimplicialComplex, Triangle
 from otjax.surfaces.plan import Entries, SurfacePlan
 
 #: ``v`` lies on ``ab`` when the angle ``a v b`` is at least 180 degrees minus this.
@@ -177,12 +177,8 @@ def _split(plan: SurfacePlan, j: TJunction) -> None:
             continue
         lam = old_bins[t].barycentric[e.bin]  # weights of t's corners, in key order
         (c,) = set(t) - {j.a, j.b}
-        if c == j.v:  # the sliver (a, v, b): to the nearest of its corners
-            pos = lam @ x[list(t)]
-            corner = np.asarray(t)[np.argmin(((pos[:, None] - x[list(t)][None]) ** 2).sum(-1), axis=1)]
-            for v in np.unique(corner):
-                pick = corner == v
-                add_entries(plan.vertex_entries, int(v), e.point[pick], np.zeros(pick.sum(), np.int64), e.mass[pick])
+        if c == j.v:  # the sliver (a, v, b)
+            to_nearest_corners(plan, t, e, lam)
             continue
         wa, wb = lam[:, t.index(j.a)], lam[:, t.index(j.b)]
         low = wb < at * (wa + wb)  # on a's side of the segment (v, c)
@@ -190,11 +186,23 @@ def _split(plan: SurfacePlan, j: TJunction) -> None:
             key = tuple(sorted(half))
             cap = plan.bins[key].capacity
             k = len(cap)
-            add_entries(plan.facet_entries, key, np.repeat(e.point[pick], k), np.tile(np.arange(k), int(pick.sum())),
+            _add(plan.facet_entries, key, np.repeat(e.point[pick], k), np.tile(np.arange(k), int(pick.sum())),
                  np.outer(e.mass[pick], cap).ravel())
 
 
-def add_entries(entries: dict, key, point: np.ndarray, bin_: np.ndarray, mass: np.ndarray) -> None:
+def to_nearest_corners(plan: SurfacePlan, t: Triangle, entries: Entries, lam: np.ndarray) -> None:
+    """Hands the ``entries`` of a removed facet ``t`` to the vertex bins of its
+    corners, each to the corner nearest its bin (``lam``: the bins' weights
+    of ``t``'s corners, in key order)."""
+    x = plan.complex.positions[list(t)]
+    corner = np.asarray(t)[np.argmin((((lam @ x)[:, None] - x[None]) ** 2).sum(-1), axis=1)]
+    for v in np.unique(corner).tolist():
+        pick = corner == v
+        _add(plan.vertex_entries, v, entries.point[pick], np.zeros(int(pick.sum()), np.int64),
+             entries.mass[pick])
+
+
+def _add(entries: dict, key, point: np.ndarray, bin_: np.ndarray, mass: np.ndarray) -> None:
     """Adds entries to ``entries[key]``, summing the mass of repeated (point, bin) pairs."""
     if not len(point):
         return
