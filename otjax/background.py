@@ -215,6 +215,24 @@ def _near_a_neighbours_flat(points: np.ndarray, weights: np.ndarray, idx: np.nda
     return np.count_nonzero((gap <= tol) & (local <= floor_scale * THIN), axis=1) >= SUPPORTING_FLATS
 
 
+def point_normals(points: np.ndarray, neighbours: int = NEIGHBOURS) -> np.ndarray:
+    """``(n, d)`` unit normals of the flats (planes in 3D, lines in 2D)
+    through each point's ``neighbours`` nearest points (itself left out),
+    by least squares; unoriented.
+
+    Args:
+      points: ``(n, d)`` float64 points, ``d`` in 2 or 3, ``n > neighbours``.
+
+    Example:
+      >>> rng = np.random.default_rng(0)
+      >>> pts = np.c_[rng.random((200, 2)), np.zeros(200)]  # the plane z = 0
+      >>> bool(np.allclose(np.abs(point_normals(pts)[:, 2]), 1.0))
+      True
+    """
+    points = np.asarray(points, np.float64)
+    return _local_flats(points, np.ones(len(points)), neighbours).normal
+
+
 def flat_noise(points: np.ndarray, neighbours: int = NOISE_NEIGHBOURS) -> float:
     """The standard deviation of the points about the shape they sample.
 

@@ -21,8 +21,10 @@ simplicial complex, for research code and notebooks.
   with local re-solves, gradient refinement.
 - :func:`filter_facets`, :func:`facet_density` -- facet filtering by mass
   density (§4.4).
-- :func:`find_caps`, :func:`remove_caps`, :func:`fit_creases`,
-  :func:`fit_border` -- facets closing a concave corner of the open border
+- :func:`find_transverse`, :func:`remove_transverse`,
+  :func:`facet_alignment`, :func:`find_caps`, :func:`remove_caps`,
+  :func:`fit_creases`, :func:`fit_border` -- facets standing across their
+  points' surface and facets closing a concave corner of the open border
   found and removed, crease vertices moved onto the planes of the points
   around them, flat open-border vertices out to where the points end (not
   in the paper; the last step of :func:`reconstruct_surface`,
@@ -56,13 +58,15 @@ from otjax.surfaces.relaxation import LocalSolution, RelaxationStats, facet_ring
 from otjax.surfaces.relocation import RelocationStats, relocate, relocation_targets
 from otjax.surfaces.result import SurfaceResult
 from otjax.surfaces.solvers import LocalSolver, exact_solver
+from otjax.surfaces.transverse import facet_alignment, find_transverse, remove_transverse
 
 __all__ = [
-    "BinSettings", "BorderFit", "CollapseChange", "ComplexArrays", "CreaseFit", "FacetBins", "FacetDensity", "FeatureRecovery", "FilteredComplex",
-    "InitialComplex", "LocalComplex", "LocalSolution", "LocalSolver", "PassStats", "RefineStats", "RelaxationStats",
-    "RelocationStats", "SimplicialComplex", "Stencil", "SurfaceEngine", "SurfacePlan", "SurfaceReconstruction",
-    "SurfaceResult", "bin_positions",
-    "exact_solver", "facet_bins", "facet_density", "facet_ring", "filter_facets", "find_caps", "fit_border", "fit_creases", "initial_complex",
-    "initial_settings", "plan_segments", "plot_complex", "reconstruct_surface", "recover_features", "refine", "relax", "relocate", "relocation_targets",
-    "remove_caps",
+    "BinSettings", "BorderFit", "CollapseChange", "ComplexArrays", "CreaseFit", "FacetBins", "FacetDensity",
+    "FeatureRecovery", "FilteredComplex", "InitialComplex", "LocalComplex", "LocalSolution", "LocalSolver",
+    "PassStats", "RefineStats", "RelaxationStats", "RelocationStats", "SimplicialComplex", "Stencil",
+    "SurfaceEngine", "SurfacePlan", "SurfaceReconstruction", "SurfaceResult", "bin_positions",
+    "exact_solver", "facet_alignment", "facet_bins", "facet_density", "facet_ring", "filter_facets",
+    "find_caps", "find_transverse", "fit_border", "fit_creases", "initial_complex", "initial_settings",
+    "plan_segments", "plot_complex", "reconstruct_surface", "recover_features", "refine", "relax",
+    "relocate", "relocation_targets", "remove_caps", "remove_transverse"
 ]

@@ -24,7 +24,7 @@ import numpy as np
 
 from otjax.surfaces.complex import SimplicialComplex, Triangle, triangle_edges
 from otjax.surfaces.plan import SurfacePlan
-from otjax.surfaces.t_junctions import to_nearest_corners
+from otjax.surfaces.t_junctions import remove_facets
 
 #: Degrees: every facet on a cap's inner edges stands at more than this from it.
 CAP_ANGLE = 60.0
@@ -76,11 +76,4 @@ def remove_caps(plan: SurfacePlan, angle: float = CAP_ANGLE, density: float = CA
     """Removes the caps of ``plan.complex`` in place (:func:`find_caps`),
     their mass handed to their corners; returns how many."""
     c = plan.complex
-    caps = find_caps(c, {t: plan.simplex_mass(t) for t in c.triangles}, angle, density)
-    for t in caps:
-        bins = plan.bins[t]
-        entries = plan.drop_facet(t)
-        c.remove_triangle(t)
-        if entries is not None and len(entries.point):
-            to_nearest_corners(plan, t, entries, bins.barycentric[entries.bin])
-    return len(caps)
+    return remove_facets(plan, find_caps(c, {t: plan.simplex_mass(t) for t in c.triangles}, angle, density))

@@ -18,7 +18,7 @@ from typing import NamedTuple
 import jax
 import numpy as np
 
-from otjax.background import estimate_background, near_shape, shape_weights
+from otjax.background import NEIGHBOURS, estimate_background, near_shape, point_normals, shape_weights
 from otjax.decimation.loop import QUEUES, DecimationStats, decimate
 from otjax.decimation.relocation import relocate
 from otjax.frame import to_canonical
@@ -35,6 +35,7 @@ from otjax.surfaces.relaxation import relax
 from otjax.surfaces.result import SurfaceResult
 from otjax.surfaces.solvers import LocalSolver, default_solver
 from otjax.surfaces.t_junctions import close_t_junctions, split_slivers
+from otjax.surfaces.transverse import remove_transverse
 from otjax.validation import check_number, check_points, check_target
 
 SOLVERS = ("batched", "exact")
@@ -138,9 +139,9 @@ def reconstruct_surface(points, masses=None, n_vertices: int = 100, *, queue: st
       final_density_factor: the facets' bins before those passes, in multiples of ``bin_density``, the
         transport relaxed on them (the result's cost is on these; 1: the decimation's): a finer quadrature
         sharpens creases and corners (docs/decisions.md#final_density).
-      fit_features: where no background was found, then drop caps (:func:`~otjax.surfaces.remove_caps`),
-        move crease vertices (and ends) onto the points' planes (:func:`~otjax.surfaces.fit_creases`), flat
-        border ones out to the points' end (:func:`~otjax.surfaces.fit_border`), drop flat facets, relax.
+      fit_features: then drop facets across their points (:func:`~otjax.surfaces.remove_transverse`); with no
+        background, caps too (:func:`~otjax.surfaces.remove_caps`), crease vertices (and ends) onto the
+        points' planes, border ones to their end (:func:`~otjax.surfaces.fit_creases`, ``fit_border``); relax.
       progress: show a progress bar.
 
     Returns:
@@ -178,7 +179,7 @@ def reconstruct_surface(points, masses=None, n_vertices: int = 100, *, queue: st
         seconds.lap("final_rebin")
         stats.relocations += _final_passes(engine, final_relocations)
         seconds.lap("final_relocation")
-        stats.relocations += _fit_features(engine.plan, q, fit_features and not shape.background, method)
+        stats.relocations += _fit_features(engine.plan, q, fit_features, shape.background, method)
         seconds.lap("feature_fit")
     return _result(engine.plan, frame, stats, dict(seconds))
 
@@ -263,27 +264,32 @@ def _shape_part(points: np.ndarray, masses: np.ndarray | None, background: str) 
     return ShapePart(points[keep], (np.ones(len(points)) if masses is None else masses)[keep] * weights[keep], True)
 
 
-def _fit_features(plan: SurfacePlan, points: np.ndarray, fit: bool, method: str) -> int:
-    """With ``fit``, removes the caps across concave corners of the open
-    border (:func:`~otjax.surfaces.caps.remove_caps`), moves the complex's
+def _fit_features(plan: SurfacePlan, points: np.ndarray, fit: bool, background: bool, method: str) -> int:
+    """With ``fit``, removes the facets standing across their points'
+    surface (:func:`~otjax.surfaces.transverse.remove_transverse`) and,
+    without ``background``, also the caps across concave corners of the open border
+    (:func:`~otjax.surfaces.caps.remove_caps`), then moves the complex's
     crease vertices and then its flat open-border vertices to the canonical
     ``points``, removes the facets the moves left lying on a line
-    (:func:`~otjax.surfaces.t_junctions.split_slivers`), then relaxes the
-    transport on the changed complex; the number of vertices moved
+    (:func:`~otjax.surfaces.t_junctions.split_slivers`); then relaxes the
+    transport on the changed complex. Returns the number of vertices moved
     (docs/decisions.md#feature_fit)."""
     if not fit:
         return 0
-    capped = remove_caps(plan)
-    arrays = plan.complex.to_arrays()
-    noise = points_noise(points)  # one estimate for both fits
-    fitted = fit_creases(arrays.vertices, arrays.triangles, points, noise=noise).vertices
-    fitted = fit_border(fitted, arrays.triangles, points, noise=noise).vertices
-    moved = np.flatnonzero(np.any(fitted != arrays.vertices, axis=1))
-    for row in moved.tolist():
-        plan.complex.move(int(arrays.vertex_ids[row]), fitted[row])
-    if len(moved):
-        split_slivers(plan)
-    if len(moved) or capped:
+    removed = remove_transverse(plan, point_normals(points, min(NEIGHBOURS, len(points) - 1)))
+    moved = np.zeros(0, np.int64)
+    if not background:
+        removed += remove_caps(plan)
+        arrays = plan.complex.to_arrays()
+        noise = points_noise(points)  # one estimate for both fits
+        fitted = fit_creases(arrays.vertices, arrays.triangles, points, noise=noise).vertices
+        fitted = fit_border(fitted, arrays.triangles, points, noise=noise).vertices
+        moved = np.flatnonzero(np.any(fitted != arrays.vertices, axis=1))
+        for row in moved.tolist():
+            plan.complex.move(int(arrays.vertex_ids[row]), fitted[row])
+        if len(moved):
+            split_slivers(plan)
+    if len(moved) or removed:
         relax(plan, LocalSolver(method), max_sweeps=REBIN_SWEEPS)
     return len(moved)
 

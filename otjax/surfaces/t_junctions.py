@@ -190,6 +190,21 @@ def _split(plan: SurfacePlan, j: TJunction) -> None:
                  np.outer(e.mass[pick], cap).ravel())
 
 
+def remove_facets(plan: SurfacePlan, facets) -> int:
+    """Removes ``facets`` from ``plan.complex`` (their edges no other facet
+    has go too), each one's entries handed to its corners
+    (:func:`to_nearest_corners`); returns how many. The caller relaxes the
+    plan afterwards."""
+    facets = list(facets)
+    for t in facets:
+        bins = plan.bins[t]
+        entries = plan.drop_facet(t)
+        plan.complex.remove_triangle(t)
+        if entries is not None and len(entries.point):
+            to_nearest_corners(plan, t, entries, bins.barycentric[entries.bin])
+    return len(facets)
+
+
 def to_nearest_corners(plan: SurfacePlan, t: Triangle, entries: Entries, lam: np.ndarray) -> None:
     """Hands the ``entries`` of a removed facet ``t`` to the vertex bins of its
     corners, each to the corner nearest its bin (``lam``: the bins' weights

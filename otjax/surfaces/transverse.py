@@ -1,0 +1,68 @@
+"""Transverse facets: facets standing across the surface of their points (not in the paper).
+
+The points a facet takes should lie along it: the flat through each
+point's neighbours should run in the facet's plane. Where the decimation
+leaves a facet spanning three vertices of one curved sheet (three of a
+ring round an open cylinder, a lid over its rim, a fin inside it) the
+facet's edges lie on the sheet and it takes the sheet's points along them
+at as little distance as the sheet's own facets: the transport cost keeps
+it, and its mass density reads like theirs, so the density filter keeps
+it too. It is no part of the shape, and where it lies over an open
+border the output's border runs along its edge instead of the sheet's.
+
+Such a facet is told by its points: their normals lie in its plane. Its
+*alignment* is the mass-weighted mean, over its plan entries, of
+``|cos|`` between its normal and the normal of its point's flat
+(:func:`otjax.background.point_normals`): near 1 for a facet on its
+points' surface (a coarse facet spanning a curved sheet: the cosine of
+half its bend), near 0 for one across it. A facet whose alignment is
+below :data:`ALIGNMENT` is transverse; its mass goes to the vertex bins of
+its corners, each entry to the corner nearest its bin, and the caller
+relaxes the plan afterwards (docs/decisions.md#transverse).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from otjax.surfaces.complex import Triangle
+from otjax.surfaces.plan import SurfacePlan
+from otjax.surfaces.t_junctions import remove_facets
+
+#: A facet whose points' normals stand, on a mass-weighted mean of ``|cos|``,
+#: below this from its own is transverse (60 degrees; docs/decisions.md#transverse).
+ALIGNMENT = 0.5
+
+
+def facet_alignment(plan: SurfacePlan, normals: np.ndarray) -> dict[Triangle, float]:
+    """``{facet: alignment}`` (module doc) of every facet of ``plan.complex``
+    that carries mass and has an area.
+
+    Args:
+      plan: the transport plan; its points are the rows of ``normals``.
+      normals: ``(N, 3)`` unit normals of the plan's points.
+    """
+    x = plan.complex.positions
+    out = {}
+    for t in sorted(plan.complex.triangles):
+        e = plan.entries(t)
+        if e is None or not e.mass.sum() > 0:
+            continue
+        n = np.cross(x[t[1]] - x[t[0]], x[t[2]] - x[t[0]])
+        length = np.linalg.norm(n)
+        if length > 0:
+            out[t] = float(e.mass @ np.abs(normals[e.point] @ (n / length)) / e.mass.sum())
+    return out
+
+
+def find_transverse(plan: SurfacePlan, normals: np.ndarray, alignment: float = ALIGNMENT) -> list[Triangle]:
+    """The facets of ``plan.complex`` whose alignment is below ``alignment``
+    (in ``(0, 1)``), in facet order (:func:`facet_alignment`)."""
+    return [t for t, a in facet_alignment(plan, normals).items() if a < alignment]
+
+
+def remove_transverse(plan: SurfacePlan, normals: np.ndarray, alignment: float = ALIGNMENT) -> int:
+    """Removes the transverse facets of ``plan.complex`` in place
+    (:func:`find_transverse`), their mass handed to their corners; returns
+    how many."""
+    return remove_facets(plan, find_transverse(plan, normals, alignment))
