@@ -66,8 +66,8 @@ def add_surface_parsers(sub) -> None:
     p.add_argument("--background", choices=("auto", "none"), default="auto",
                    help="estimate uniform background noise and discount it (auto, the default) or not")
     p.add_argument("--no-feature-fit", dest="fit_features", action="store_false",
-                   help="leave crease and open-border vertices where the transport put them (default: fit them "
-                   "to the points' planes and ends)")
+                   help="keep the decimation's output as the transport left it (default: drop facets across "
+                   "their points' surface, fit crease and open-border vertices to the points' planes and ends)")
     _outputs(p)
     p.set_defaults(run=_run_surface, usage=p.error)
 
