@@ -64,6 +64,11 @@ WIDER = 2.0
 #: Neighbours of the flats :func:`flat_noise` measures the noise about:
 #: fewer follow the noise (docs/decisions.md#feature_fit).
 NOISE_NEIGHBOURS = 32
+#: A point's normal is reliable where its neighbours' median distance to their flat is at most this
+#: many times the median of that over all points (:func:`point_normals`; docs/decisions.md#transverse) ...
+RELIABLE = 2.0
+#: ... plus this many times the points' median distance to their neighbours.
+RELIABLE_FLOOR = 0.02
 # Median absolute residual to standard deviation, for Gaussian residuals.
 _MAD_TO_SIGMA = 1.4826
 
@@ -215,22 +220,47 @@ def _near_a_neighbours_flat(points: np.ndarray, weights: np.ndarray, idx: np.nda
     return np.count_nonzero((gap <= tol) & (local <= floor_scale * THIN), axis=1) >= SUPPORTING_FLATS
 
 
-def point_normals(points: np.ndarray, neighbours: int = NEIGHBOURS) -> np.ndarray:
-    """``(n, d)`` unit normals of the flats (planes in 3D, lines in 2D)
-    through each point's ``neighbours`` nearest points (itself left out),
-    by least squares; unoriented.
+class PointNormals(NamedTuple):
+    """Per point, the normal of the flat through its neighbours and whether
+    it tells the surface's (:func:`point_normals`).
+
+    Attributes:
+      normal: ``(n, d)`` unit normals, unoriented.
+      reliable: ``(n,)`` bool: the neighbours lie on their flat (false
+        where they straddle a crease, a corner or a crossing).
+    """
+
+    normal: np.ndarray
+    reliable: np.ndarray
+
+
+def point_normals(points: np.ndarray, neighbours: int = NEIGHBOURS) -> PointNormals:
+    """The unit normals of the flats (planes in 3D, lines in 2D) through
+    each point's ``neighbours`` nearest points (itself left out), by least
+    squares, and which of them to trust: those whose neighbours' median
+    distance to their flat is at most :data:`RELIABLE` times the median of
+    that over all points (the noise), plus :data:`RELIABLE_FLOOR` times the
+    points' median distance to their neighbours (exact flats read 0).
 
     Args:
       points: ``(n, d)`` float64 points, ``d`` in 2 or 3, ``n > neighbours``.
 
     Example:
       >>> rng = np.random.default_rng(0)
-      >>> pts = np.c_[rng.random((200, 2)), np.zeros(200)]  # the plane z = 0
-      >>> bool(np.allclose(np.abs(point_normals(pts)[:, 2]), 1.0))
+      >>> u, v = rng.random((2, 400))
+      >>> pts = np.r_[np.c_[u[:200], v[:200], np.zeros(200)], np.c_[np.zeros(200), v[200:], u[200:]]]
+      >>> got = point_normals(pts)  # the planes z = 0 and x = 0, meeting at a crease along y
+      >>> far = np.maximum(pts[:, 0], pts[:, 2]) > 0.3
+      >>> bool(np.all(got.reliable[far])), bool(np.any(~got.reliable[~far]))
+      (True, True)
+      >>> bool(np.allclose(np.abs(got.normal[far & (pts[:, 2] == 0)][:, 2]), 1.0))
       True
     """
     points = np.asarray(points, np.float64)
-    return _local_flats(points, np.ones(len(points)), neighbours).normal
+    flats = _local_flats(points, np.ones(len(points)), neighbours)
+    spacing = float(np.median(np.linalg.norm(points[flats.idx] - points[:, None], axis=-1)))
+    bound = RELIABLE * float(np.median(flats.local)) + RELIABLE_FLOOR * spacing
+    return PointNormals(flats.normal, flats.local <= bound)
 
 
 def flat_noise(points: np.ndarray, neighbours: int = NOISE_NEIGHBOURS) -> float:

@@ -11,12 +11,14 @@ it too. It is no part of the shape, and where it lies over an open
 border the output's border runs along its edge instead of the sheet's.
 
 Such a facet is told by its points: their normals lie in its plane. Its
-*alignment* is the mass-weighted mean, over its plan entries, of
-``|cos|`` between its normal and the normal of its point's flat
-(:func:`otjax.background.point_normals`): near 1 for a facet on its
-points' surface (a coarse facet spanning a curved sheet: the cosine of
-half its bend), near 0 for one across it. A facet whose alignment is
-below :data:`ALIGNMENT` is transverse; its mass goes to the vertex bins of
+*alignment* is the mass-weighted mean, over its plan entries whose
+point's normal is reliable, of ``|cos|`` between its normal and the
+normal of its point's flat (:func:`otjax.background.point_normals`): near
+1 for a facet on its points' surface (a coarse facet spanning a curved
+sheet: the cosine of half its bend), near 0 for one across it. A point
+whose neighbours straddle a crease or a crossing has a normal of neither
+sheet and is no evidence; a facet with less than :data:`EVIDENCE` of its
+mass on reliable points has no alignment. A facet whose alignment is below :data:`ALIGNMENT` is transverse; its mass goes to the vertex bins of
 its corners, each entry to the corner nearest its bin, and the caller
 relaxes the plan afterwards (docs/decisions.md#transverse).
 """
@@ -25,6 +27,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from otjax.background import PointNormals
 from otjax.surfaces.complex import Triangle
 from otjax.surfaces.plan import SurfacePlan
 from otjax.surfaces.t_junctions import remove_facets
@@ -32,36 +35,41 @@ from otjax.surfaces.t_junctions import remove_facets
 #: A facet whose points' normals stand, on a mass-weighted mean of ``|cos|``,
 #: below this from its own is transverse (60 degrees; docs/decisions.md#transverse).
 ALIGNMENT = 0.5
+#: A facet has an alignment where at least this share of its mass is on
+#: points with reliable normals (docs/decisions.md#transverse).
+EVIDENCE = 0.5
 
 
-def facet_alignment(plan: SurfacePlan, normals: np.ndarray) -> dict[Triangle, float]:
+def facet_alignment(plan: SurfacePlan, normals: PointNormals) -> dict[Triangle, float]:
     """``{facet: alignment}`` (module doc) of every facet of ``plan.complex``
-    that carries mass and has an area.
+    that has an area and carries mass, at least :data:`EVIDENCE` of it on
+    points with reliable normals.
 
     Args:
       plan: the transport plan; its points are the rows of ``normals``.
-      normals: ``(N, 3)`` unit normals of the plan's points.
+      normals: the plan's points' :class:`~otjax.background.PointNormals`.
     """
     x = plan.complex.positions
     out = {}
     for t in sorted(plan.complex.triangles):
         e = plan.entries(t)
-        if e is None or not e.mass.sum() > 0:
+        if e is None:
             continue
+        weight = e.mass * normals.reliable[e.point]
         n = np.cross(x[t[1]] - x[t[0]], x[t[2]] - x[t[0]])
         length = np.linalg.norm(n)
-        if length > 0:
-            out[t] = float(e.mass @ np.abs(normals[e.point] @ (n / length)) / e.mass.sum())
+        if weight.sum() > 0 and weight.sum() >= EVIDENCE * e.mass.sum() and length > 0:
+            out[t] = float(weight @ np.abs(normals.normal[e.point] @ (n / length)) / weight.sum())
     return out
 
 
-def find_transverse(plan: SurfacePlan, normals: np.ndarray, alignment: float = ALIGNMENT) -> list[Triangle]:
+def find_transverse(plan: SurfacePlan, normals: PointNormals, alignment: float = ALIGNMENT) -> list[Triangle]:
     """The facets of ``plan.complex`` whose alignment is below ``alignment``
     (in ``(0, 1)``), in facet order (:func:`facet_alignment`)."""
     return [t for t, a in facet_alignment(plan, normals).items() if a < alignment]
 
 
-def remove_transverse(plan: SurfacePlan, normals: np.ndarray, alignment: float = ALIGNMENT) -> int:
+def remove_transverse(plan: SurfacePlan, normals: PointNormals, alignment: float = ALIGNMENT) -> int:
     """Removes the transverse facets of ``plan.complex`` in place
     (:func:`find_transverse`), their mass handed to their corners; returns
     how many."""

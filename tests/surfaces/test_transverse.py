@@ -86,6 +86,25 @@ def test_the_fin_and_the_lid_are_transverse_and_the_sides_are_not():
     assert find_transverse(plan, point_normals(plan.points)) == [FIN, LID]
 
 
+def test_points_whose_normals_are_unreliable_are_no_evidence():
+    plan = _plan()
+    normals = point_normals(plan.points)
+    assert normals.reliable.mean() > 0.99  # a smooth cylinder: nearly every neighbourhood is flat
+    fin = plan.entries(FIN).point  # unit masses: a share of the points is a share of the mass
+
+    def doubt(share):  # the fin's first points taken as straddling a crease
+        reliable = np.ones(len(plan.points), bool)
+        reliable[fin[:int(np.ceil(share * len(fin)))]] = False
+        return normals._replace(reliable=reliable)
+
+    # under half of the fin's mass on reliable points: no alignment, and it stays
+    assert FIN not in facet_alignment(plan, doubt(0.6))
+    assert find_transverse(plan, doubt(0.6)) == [LID]
+    # over half: measured on those alone
+    assert facet_alignment(plan, doubt(0.4))[FIN] < 0.2
+    assert find_transverse(plan, doubt(0.4)) == [FIN, LID]
+
+
 @settings(max_examples=100, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(st.integers(0, 2**32 - 1), st.floats(1e-3, 1e3), st.floats(1e-2, 1e2))
 def test_transverse_facets_do_not_depend_on_the_frame_or_the_units(seed, scale, unit):
