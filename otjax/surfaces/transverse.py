@@ -18,8 +18,9 @@ normal of its point's flat (:func:`otjax.background.point_normals`): near
 sheet: the cosine of half its bend), near 0 for one across it. A point
 whose neighbours straddle a crease or a crossing has a normal of neither
 sheet and is no evidence; a facet with less than :data:`EVIDENCE` of its
-mass on reliable points has no alignment. A facet whose alignment is below :data:`ALIGNMENT` is transverse; its mass goes to the vertex bins of
-its corners, each entry to the corner nearest its bin, and the caller
+mass on reliable points has no alignment. A facet whose alignment is
+below :data:`ALIGNMENT` is transverse; its mass goes to the vertex bins
+of its corners, each entry to the corner nearest its bin, and the caller
 relaxes the plan afterwards (docs/decisions.md#transverse).
 """
 
