@@ -14,7 +14,7 @@ from otjax.surfaces.plan import BinSettings, Entries, SurfacePlan
 from otjax.surfaces.transverse import facet_alignment, find_transverse, remove_transverse
 
 # An open cylinder of radius 1 round the z axis, z in [0, 1]: three rings of
-# eight vertices (z = 0, 1/2, 1, ids 8 k + i), the side between them in
+# eight vertices (z = 0, 1/2, 1, ids K k + i), the side between them in
 # triangles; a fin across the middle ring and a lid over the top rim, each
 # on three consecutive vertices of its ring.
 K = 8
@@ -23,7 +23,7 @@ LID = (16, 17, 18)
 
 
 def _ring(k, i):
-    return 8 * k + i % K
+    return K * k + i % K
 
 
 SIDES = [tuple(sorted(t)) for k in (0, 1) for i in range(K)
