@@ -23,6 +23,8 @@ from __future__ import annotations
 import numpy as np
 
 from otjax.surfaces.complex import SimplicialComplex, Triangle, triangle_edges
+from otjax.surfaces.filtering import facet_density
+from otjax.surfaces.fit_input import unit_normals
 from otjax.surfaces.plan import SurfacePlan
 from otjax.surfaces.t_junctions import remove_facets
 
@@ -50,21 +52,17 @@ def find_caps(complex_: SimplicialComplex, mass: dict, angle: float = CAP_ANGLE,
       >>> find_caps(c, {(0, 1, 2): 1.0, (1, 2, 3): 1.0, (1, 3, 4): 1.0, (3, 4, 5): 1.0, (0, 1, 4): 0.2})
       [(0, 1, 4)]
     """
-    x = complex_.positions
     facets = sorted(complex_.triangles)
     if not facets:
         return []
-    corners = x[np.array(facets)]
-    cross = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
-    area = 0.5 * np.linalg.norm(cross, axis=1)
-    unit = cross / np.maximum(2 * area, np.finfo(float).tiny)[:, None]
-    m = np.array([mass.get(t, 0.0) for t in facets])
-    mean = m.sum() / area.sum() if area.sum() > 0 else 0.0
+    rows = np.array(facets)
+    unit = unit_normals(complex_.positions, rows)
+    dens = facet_density(complex_.positions, rows, [mass.get(t, 0.0) for t in facets])
     row = {t: i for i, t in enumerate(facets)}
     cos_bound = np.cos(np.radians(angle))
     found = []
     for i, t in enumerate(facets):
-        if not (area[i] > 0 and m[i] < density * mean * area[i]):
+        if not (dens.area[i] > 0 and dens.relative[i] < density):
             continue
         others = [[row[u] for u in complex_.edges[e] if u != t] for e in triangle_edges(t)]
         if any(not o for o in others) and all(abs(unit[i] @ unit[j]) < cos_bound for o in others for j in o):

@@ -30,6 +30,7 @@ import numpy as np
 
 from otjax.background import PointNormals
 from otjax.surfaces.complex import Triangle
+from otjax.surfaces.fit_input import unit_normals
 from otjax.surfaces.plan import SurfacePlan
 from otjax.surfaces.t_junctions import remove_facets
 
@@ -50,17 +51,16 @@ def facet_alignment(plan: SurfacePlan, normals: PointNormals) -> dict[Triangle, 
       plan: the transport plan; its points are the rows of ``normals``.
       normals: the plan's points' :class:`~otjax.background.PointNormals`.
     """
-    x = plan.complex.positions
+    facets = sorted(plan.complex.triangles)
+    unit = unit_normals(plan.complex.positions, np.array(facets, np.int64).reshape(-1, 3))
     out = {}
-    for t in sorted(plan.complex.triangles):
+    for t, n in zip(facets, unit):
         e = plan.entries(t)
-        if e is None:
+        if e is None or not np.any(n):
             continue
         weight = e.mass * normals.reliable[e.point]
-        n = np.cross(x[t[1]] - x[t[0]], x[t[2]] - x[t[0]])
-        length = np.linalg.norm(n)
-        if weight.sum() > 0 and weight.sum() >= EVIDENCE * e.mass.sum() and length > 0:
-            out[t] = float(weight @ np.abs(normals.normal[e.point] @ (n / length)) / weight.sum())
+        if weight.sum() > 0 and weight.sum() >= EVIDENCE * e.mass.sum():
+            out[t] = float(weight @ np.abs(normals.normal[e.point] @ n) / weight.sum())
     return out
 
 
