@@ -33,6 +33,7 @@ from otjax.surfaces.complex import Triangle
 from otjax.surfaces.fit_input import unit_normals
 from otjax.surfaces.plan import SurfacePlan
 from otjax.surfaces.t_junctions import remove_facets
+from otjax.validation import check_number
 
 #: A facet whose points' normals stand, on a mass-weighted mean of ``|cos|``,
 #: below this from its own is transverse (60 degrees; docs/decisions.md#transverse).
@@ -66,7 +67,9 @@ def facet_alignment(plan: SurfacePlan, normals: PointNormals) -> dict[Triangle, 
 
 def find_transverse(plan: SurfacePlan, normals: PointNormals, alignment: float = ALIGNMENT) -> list[Triangle]:
     """The facets of ``plan.complex`` whose alignment is below ``alignment``
-    (in ``(0, 1)``), in facet order (:func:`facet_alignment`)."""
+    (in ``(0, 1)``; else ``ValueError``), in facet order (:func:`facet_alignment`)."""
+    if not 0 < check_number("alignment", alignment) < 1:
+        raise ValueError(f"alignment must be in (0, 1), got {alignment!r}")
     return [t for t, a in facet_alignment(plan, normals).items() if a < alignment]
 
 

@@ -4,6 +4,7 @@ with the plan kept whole."""
 import functools
 
 import numpy as np
+import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
@@ -84,6 +85,17 @@ def test_the_fin_and_the_lid_are_transverse_and_the_sides_are_not():
     # a side facet spans 45 degrees of the ring: its points' normals within 22.5 degrees of its own
     assert min(align[t] for t in SIDES if t in align) > np.cos(np.radians(25))
     assert find_transverse(plan, point_normals(plan.points)) == [FIN, LID]
+
+
+
+@pytest.mark.parametrize("alignment", [0.0, 1.0, -0.5, 2.0, float("nan"), "0.5"])
+def test_an_alignment_outside_the_open_unit_interval_is_refused(alignment):
+    plan = _plan()
+    with pytest.raises(ValueError, match="alignment must be"):
+        find_transverse(plan, point_normals(plan.points), alignment)
+    with pytest.raises(ValueError, match="alignment must be"):
+        remove_transverse(plan, point_normals(plan.points), alignment)
+    assert FIN in plan.complex.triangles  # refused before anything was removed
 
 
 def test_points_whose_normals_are_unreliable_are_no_evidence():
