@@ -76,6 +76,9 @@ def _curve_parser(sub) -> argparse.ArgumentParser:
                    help="estimate uniform background noise and discount it (auto, the default) or not")
     p.add_argument("--keep-chords", action="store_true", default=None,
                    help="keep the redundant chords of 3-cycles and spurs at junctions that noise leaves")
+    p.add_argument("--keep-ends", action="store_true", default=None,
+                   help="leave the open ends where the transport puts them (by default they move to where "
+                   "their points end)")
     p.add_argument("--relocation", type=int, metavar="K",
                    help="relocate during the last K collapses only (default: 100)")
     p.add_argument("--final-relocations", type=int, metavar="P", help="relocation passes at the end")
@@ -154,6 +157,7 @@ def _load(args, usage) -> tuple:
         "density": args.density,
         "background": args.background,
         "chords": None if args.keep_chords is None else not args.keep_chords,
+        "fit_ends": None if args.keep_ends is None else not args.keep_ends,
         "relocation": args.relocation,
         "final_relocations": args.final_relocations,
         "refine": args.refine,

@@ -117,6 +117,8 @@ def test_every_option_reaches_the_api(fake, square_file, capsys):
         "--seed",
         "11",
         "--merge-duplicates",
+        "--keep-chords",
+        "--keep-ends",
         "--no-progress",
     ]
     assert main(argv) == 0
@@ -134,6 +136,8 @@ def test_every_option_reaches_the_api(fake, square_file, capsys):
         "round_fraction": 0.2,
         "seed": 11,
         "merge_duplicates": True,
+        "chords": False,
+        "fit_ends": False,
         "progress": False,
     }
 

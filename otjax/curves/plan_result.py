@@ -19,19 +19,43 @@ from otjax.curves.plan import TransportPlan
 from otjax.curves.result import CurveResult
 
 
+class Holders(NamedTuple):
+    """Where each point of a plan sends its mass.
+
+    Attributes:
+      solid: ``(n,)`` bool, whether the point stays on its edge.
+      keys: ``(n, 2)`` the edge key each point is assigned to.
+      vertex: ``(n,)`` int64, the vertex a point of a ghost edge goes to (its
+        nearer end, ties to the lower id, as ``min`` in the kernel gives the
+        same cost either way); -1 for a point on a solid edge.
+    """
+
+    solid: np.ndarray
+    keys: np.ndarray
+    vertex: np.ndarray
+
+
+def point_holders(plan: TransportPlan) -> Holders:
+    """The :class:`Holders` of ``plan``'s points."""
+    xy = plan.tri.xy
+    keys = plan.pt_edge
+    solid = plan.solid_of(keys)
+    p = plan.points
+    da = ((p - xy[keys[:, 0]]) ** 2).sum(1)
+    db = ((p - xy[keys[:, 1]]) ** 2).sum(1)
+    return Holders(solid, keys, np.where(solid, -1, np.where(da <= db, keys[:, 0], keys[:, 1])))
+
+
 def vertex_and_edge_masses(plan: TransportPlan) -> tuple[dict, dict]:
     """Mass transported to each solid edge and to each vertex.
 
     Points of a solid edge stay on it; points of a ghost edge go to its
-    nearer endpoint (ties to the lower id, as ``min`` in the kernel gives the
-    same cost either way).
+    nearer endpoint (:func:`point_holders`).
 
     Returns:
       ``(edge_mass, vertex_mass)`` dicts keyed by edge key / vertex id.
     """
-    xy = plan.tri.xy
-    keys = plan.pt_edge
-    solid = plan.solid_of(keys)
+    solid, keys, to_vertex = point_holders(plan)
     edge_mass: dict = {}
     vertex_mass: dict = {}
     if solid.any():
@@ -40,11 +64,8 @@ def vertex_and_edge_masses(plan: TransportPlan) -> tuple[dict, dict]:
         edge_mass = {(int(a), int(b)): float(s) for (a, b), s in zip(code, sums)}
     ghost = ~solid
     if ghost.any():
-        p, k = plan.points[ghost], keys[ghost]
-        da = ((p - xy[k[:, 0]]) ** 2).sum(1)
-        db = ((p - xy[k[:, 1]]) ** 2).sum(1)
-        end = np.where(da <= db, k[:, 0], k[:, 1])
-        sums = np.bincount(end, plan.mass[ghost], minlength=len(xy))
+        end = to_vertex[ghost]
+        sums = np.bincount(end, plan.mass[ghost], minlength=len(plan.tri.xy))
         vertex_mass = {int(v): float(sums[v]) for v in np.unique(end)}
     return edge_mass, vertex_mass
 

@@ -19,6 +19,7 @@ import numpy as np
 
 from otjax.background import Background, estimate_background, shape_weights
 from otjax.curves.decimate import QUEUES, DecimationStats, decimate, within_tolerance
+from otjax.curves.end_fit import fit_ends
 from otjax.curves.engine import CurveEngine
 from otjax.curves.plan import TransportPlan
 from otjax.curves.plan_result import result_from_plan
@@ -44,7 +45,7 @@ GC_YOUNG = 20_000
 
 def reconstruct_curve(points, masses=None, n_vertices: int | None = None, *, tolerance: float | None = None,
                       relevance: float = 0.0, density: float = 0.0, background: str = "auto",
-                      chords: bool = True, relocation: int | None = 100,
+                      chords: bool = True, fit_ends: bool = True, relocation: int | None = 100,
                       final_relocations: int = 4, refine: bool = False, queue: str | None = None,
                       choices: int = 15, round_fraction: float = 0.05, initial_vertices: int | None = None,
                       seed: int = 0, merge_duplicates: bool = False, progress: bool = False) -> CurveResult:
@@ -73,6 +74,7 @@ def reconstruct_curve(points, masses=None, n_vertices: int | None = None, *, tol
         nothing changes. ``"none"``: no estimate.
       chords: drop the redundant chords of 3-cycles of solid edges and the spurs at junctions
         that noise leaves (:func:`otjax.curves.filtering.redundant_edges`).
+      fit_ends: move each open end, last, to where its points end (:func:`otjax.curves.end_fit.fit_ends`).
       relocation: relocate the vertices of the modified one-ring after each of the last ``relocation``
         collapses (paper and default: 100); ``None``: after every collapse (as the C++ reference does);
         ``0`` disables. Ignored in pure tolerance mode, where the end is not known ahead.
@@ -111,10 +113,10 @@ def reconstruct_curve(points, masses=None, n_vertices: int | None = None, *, tol
     t_start = time.perf_counter()
     points, masses = check_points(points, masses, dim=2, merge_duplicates=merge_duplicates)
     params = _check_params(len(points), n_vertices=n_vertices, tolerance=tolerance, relevance=relevance,
-                           density=density, background=background, chords=chords, relocation=relocation,
-                           final_relocations=final_relocations, refine=refine, queue=queue, choices=choices,
-                           round_fraction=round_fraction, initial_vertices=initial_vertices, seed=seed,
-                           merge_duplicates=merge_duplicates)
+                           density=density, background=background, chords=chords, fit_ends=fit_ends,
+                           relocation=relocation, final_relocations=final_relocations, refine=refine,
+                           queue=queue, choices=choices, round_fraction=round_fraction,
+                           initial_vertices=initial_vertices, seed=seed, merge_duplicates=merge_duplicates)
     given = _in_frame(points, masses, params["background"])
     # Point location is exact float64 arithmetic: the whole run is in JAX's x64 mode, for its duration only.
     with jax.enable_x64(True), _fewer_collections():
@@ -170,7 +172,8 @@ def _discount_background(points, masses, mode: str):
     return noise, masses * shape_weights(noise) if noise.found else masses
 
 
-def _check_params(n_points: int, *, n_vertices, tolerance, relevance, density, background, chords, relocation,
+def _check_params(n_points: int, *, n_vertices, tolerance, relevance, density, background, chords, fit_ends,
+                  relocation,
                   final_relocations,
                   refine, queue, choices, round_fraction, initial_vertices, seed, merge_duplicates) -> dict:
     """The validated parameters of :func:`reconstruct_curve`, as its result's ``params``."""
@@ -206,7 +209,7 @@ def _check_params(n_points: int, *, n_vertices, tolerance, relevance, density, b
     if queue is None:
         queue = default_queue(initial_vertices, n_vertices)
     return {"n_vertices": n_vertices, "tolerance": tolerance, "relevance": relevance, "density": density,
-            "background": background, "chords": bool(chords),
+            "background": background, "chords": bool(chords), "fit_ends": bool(fit_ends),
             "relocation": relocation, "final_relocations": final_relocations, "refine": bool(refine),
             "queue": queue, "choices": choices, "round_fraction": round_fraction,
             "initial_vertices": initial_vertices,
@@ -221,11 +224,12 @@ class _Outcome(NamedTuple):
     seconds: dict
     relocations: int
     refined: dict | None
+    ends: int
 
 
 def _run(points, masses, params: dict, progress: bool) -> _Outcome:
     """The pipeline's steps on validated input (``params``): initial
-    triangulation, decimation, final relocation passes, refinement."""
+    triangulation, decimation, final relocation passes, refinement, end fit."""
     timings = {}
     t0 = time.perf_counter()
     rng = np.random.default_rng(params["seed"])
@@ -249,7 +253,13 @@ def _run(points, masses, params: dict, progress: bool) -> _Outcome:
         if engine is not before:
             stats.kernel_calls += engine.scorer.calls
         timings["refine"] = time.perf_counter() - t0
-    return _Outcome(engine, stats, timings, moved, refined)
+    ends = 0
+    if params["fit_ends"]:
+        t0 = time.perf_counter()
+        tolerance = params["tolerance"]
+        ends = fit_ends(engine, within_tolerance(tolerance) if tolerance is not None else None)
+        timings["end_fit"] = time.perf_counter() - t0
+    return _Outcome(engine, stats, timings, moved, refined, ends)
 
 
 def _triangulate(points: np.ndarray, masses: np.ndarray, initial_vertices: int,
@@ -291,7 +301,7 @@ def _history(run: _Outcome, noise: Background | None) -> dict:
             "updated": stats.updated, "kernel_calls": stats.kernel_calls, "seconds": run.seconds,
             "rounds": stats.rounds, "switched_at": stats.switched_at,
             "compiled_shapes": run.engine.compiled_shapes,
-            "refine": run.refined,
+            "refine": run.refined, "ends_fitted": run.ends,
             "background_fraction": noise.fraction if noise is not None else 0.0}
 
 

@@ -30,8 +30,9 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from otjax.metrics3d import boundary_edges
-from otjax.surfaces.fit_input import (VertexFit, checked, points_noise, uniform_end, unit_normals,
+from otjax.surfaces.fit_input import (VertexFit, checked, points_noise, unit_normals,
                                       vertex_facets, without_flattening)
+from otjax.uniform_ends import uniform_end
 
 #: Largest angle, in degrees, between two facets of a vertex that still
 #: counts as flat (docs/decisions.md#border_fit).
@@ -66,7 +67,7 @@ def fit_border(vertices, triangles, points, flat_angle: float = FLAT_ANGLE,
     with ``|(p - v).T| <= L/2``, ``|(p - v).N| <= L/10`` and
     ``|(p - v).out| <= L``; with at least :data:`MIN_POINTS` of them, ``v``
     moves along ``out`` to where their ``(p - v).out`` end
-    (:func:`~otjax.surfaces.fit_input.uniform_end`: past the largest by
+    (:func:`~otjax.uniform_ends.uniform_end`: past the largest by
     their mean spacing, or the quantile that stands for it in the points'
     ``noise``; outward, or inward where the points end before it; inward
     by at most ``L / 2``: the vertex stays where they end further in).

@@ -35,8 +35,9 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from otjax.metrics3d import edge_sharpness
-from otjax.surfaces.fit_input import (VertexFit, checked, points_noise, uniform_end, unit_normals,
+from otjax.surfaces.fit_input import (VertexFit, checked, points_noise, unit_normals,
                                       vertex_facets, without_flattening)
+from otjax.uniform_ends import uniform_end
 
 #: Dihedral sharpness, in degrees, above which an edge is a crease
 #: (docs/decisions.md#feature_fit).
@@ -214,7 +215,7 @@ def _crease_end(target, normals, neighbours, centre, near, reach, noise: float =
     """``target``, on the line of the planes ``normals (2, 3)``, slid along
     it away from ``centre`` (of the vertex's facets) to where the points
     ``near`` within :data:`TUBE` ``* reach`` of the line end
-    (:func:`~otjax.surfaces.fit_input.uniform_end`, with the points'
+    (:func:`~otjax.uniform_ends.uniform_end`, with the points'
     standard deviation ``noise``): a border vertex
     ending its crease goes where the crease of the points ends.
     Only where its crease neighbours ``(k, 3)`` within :data:`GAP` ``*
