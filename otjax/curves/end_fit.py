@@ -112,15 +112,27 @@ def propose_end_moves(plan: TransportPlan, vertices=None) -> list[EndMove]:
         return []
     xy, pts = plan.tri.xy, plan.points
     code = keys[:, 0] * len(xy) + keys[:, 1]
+    # The points of every end's edge and of every end vertex, grouped once (not one pass each).
+    edge_codes = [min(v, o) * len(xy) + max(v, o) for v, o in ends.items()]
+    by_edge = _groups(code, solid & np.isin(code, edge_codes))
+    by_vertex = _groups(holder, np.isin(holder, list(ends)))
+    none = np.zeros(0, np.int64)
     moves = []
     for v, o in sorted(ends.items()):
-        a, b = min(v, o), max(v, o)
-        on_edge = pts[solid & (code == a * len(xy) + b)]
-        own = pts[holder == v]
-        pos = end_position(on_edge, own, xy[v], xy[o])
+        on_edge = pts[by_edge.get(min(v, o) * len(xy) + max(v, o), none)]
+        pos = end_position(on_edge, pts[by_vertex.get(v, none)], xy[v], xy[o])
         if pos is not None and np.all(np.isfinite(pos)) and np.any(pos != xy[v]):
             moves.append(EndMove(v, o, pos))
     return moves
+
+
+def _groups(values: np.ndarray, mask: np.ndarray) -> dict[int, np.ndarray]:
+    """``{value: ids}``: the ids (increasing) of the entries of ``values (n,)``
+    where ``mask``, grouped by value."""
+    ids = np.flatnonzero(mask)
+    order = np.argsort(values[ids], kind="stable")
+    keys, starts = np.unique(values[ids][order], return_index=True)
+    return {int(k): ids[chunk] for k, chunk in zip(keys, np.split(order, starts[1:]))}
 
 
 def fit_ends(engine, veto=None) -> int:
