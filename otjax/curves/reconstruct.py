@@ -173,9 +173,8 @@ def _discount_background(points, masses, mode: str):
 
 
 def _check_params(n_points: int, *, n_vertices, tolerance, relevance, density, background, chords, fit_ends,
-                  relocation,
-                  final_relocations,
-                  refine, queue, choices, round_fraction, initial_vertices, seed, merge_duplicates) -> dict:
+                  relocation, final_relocations, refine, queue, choices, round_fraction, initial_vertices, seed,
+                  merge_duplicates) -> dict:
     """The validated parameters of :func:`reconstruct_curve`, as its result's ``params``."""
     if n_vertices is None and tolerance is None:
         raise ValueError("give n_vertices (a target vertex count) or tolerance (or both)")
