@@ -261,13 +261,14 @@ class TransportPlan:
         self.pt_code[cand.point_ids] = new_code
         switched = old_code != new_code
         # An edge whose points and cost are what they were changed nothing
-        # for the stars on its far side (Change.quiet).
+        # for the stars on its far side (Change.quiet); an edge missing from
+        # the table carried no point, at cost 0.
         reassigned = set(old_code[switched].tolist()) | set(new_code[switched].tolist())
         kept = set()
         get = self.edge_cost.get
         for k, code, c, n, solid in zip(map(tuple, cand.keys.tolist()), codes.tolist(), scored.edge_cost.tolist(),
                                         scored.normal.tolist(), scored.solid.tolist()):
-            if code not in reassigned and get(k) == c:
+            if code not in reassigned and get(k, 0.0) == c:
                 kept.add(k)
             self.edge_cost[k] = c
             self.edge_normal[k] = n
