@@ -7,6 +7,8 @@
 - :mod:`otjax.batch.pipeline` -- dispatching packed batches to a jitted
   kernel without waiting, with a buffer pool and a record of the compiled
   shapes.
+- :mod:`otjax.batch.exported` -- each kernel shape kept on disk as an
+  exported module, so that a new process does not trace it again.
 """
 
 from otjax.batch.fields import Dims, Field, FieldSpec, Gather, PackedBuffers, Prefix

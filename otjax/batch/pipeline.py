@@ -17,6 +17,7 @@ from typing import Callable, NamedTuple
 import jax
 import numpy as np
 
+from otjax.batch.exported import exported_kernel
 from otjax.batch.fields import FieldSpec, PackedBuffers
 
 
@@ -85,12 +86,14 @@ class KernelPipeline:
         self.calls = 0
         self.shapes_seen: set[int] = set()
         self._pool: dict[int, list[PackedBuffers]] = {}
+        self._calls: dict[int, Callable] = {}  # row capacity -> the kernel at that shape
 
     def __getstate__(self) -> dict:
         # A jitted kernel pickles by the module and name it was defined with.
         state = dict(self.__dict__)
         state["kernel"] = (self.kernel.__module__, self.kernel.__qualname__)
         state["_pool"] = {}
+        state["_calls"] = {}
         return state
 
     def __setstate__(self, state: dict) -> None:
@@ -108,7 +111,11 @@ class KernelPipeline:
         buffers.fill(values)
         self.shapes_seen.add(r)
         self.calls += 1
-        return Handle(self.kernel(buffers.floats, buffers.ints, rows=r, dtype=self.dtype), buffers)
+        call = self._calls.get(r)
+        if call is None:
+            call = self._calls[r] = exported_kernel(self.kernel, {"rows": r, "dtype": self.dtype},
+                                                    (buffers.floats, buffers.ints))
+        return Handle(call(buffers.floats, buffers.ints), buffers)
 
     def wait(self, handle: Handle) -> tuple:
         """The call's outputs as host arrays; its buffers go back to the pool."""

@@ -280,6 +280,10 @@ class Scores(NamedTuple):
     unresolved: jax.Array
 
 
+# Its calls are kept as exported modules (otjax.batch.exported).
+jax.export.register_namedtuple_serialization(Scores, serialized_name="otjax.curves.scoring.Scores")
+
+
 @functools.partial(jax.jit, static_argnames=("dtype", "retry_per_row"))
 def score_flat(batch: FlatBatch, dtype=jnp.float64, retry_per_row: int = RETRY_PER_ROW):
     """Locates, assigns and costs a flat batch; see the module docstring.
