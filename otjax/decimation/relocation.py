@@ -6,6 +6,11 @@ from typing import Callable, NamedTuple
 
 import numpy as np
 
+# A call proposes at least this many waiting vertices, near ones included:
+# a proposal stays valid until a move changes something of its vertex
+# (docs/decisions.md#relocation_batch).
+SPECULATE = 8
+
 
 class Moves(NamedTuple):
     """What a pass of :func:`relocate` did: ``dirty`` vertices (their stencils
@@ -25,9 +30,11 @@ def relocate(engine, vertices, veto: Callable | None = None) -> Moves:
     made and scored on the state the moves before it left; the work is
     batched: the proposals of a prefix of the waiting vertices that lie
     more than two edges apart (paths through immovable vertices do not
-    count) are made and scored in one call, then applied
-    in order (a vertex that an applied move made dirty after all ends the
-    prefix early, and the next call resumes there).
+    count), or of the next :data:`SPECULATE` if that prefix is shorter, are
+    made and scored in one call, then applied in order. A vertex that an
+    applied move made dirty (or quiet) ends the prefix: its proposal is
+    dropped and the next call resumes there, proposing again only the
+    vertices without a proposal still valid.
 
     Args:
       engine: gives ``movable(v)``, ``propose_moves(vertices) -> [(vertex,
@@ -44,16 +51,22 @@ def relocate(engine, vertices, veto: Callable | None = None) -> Moves:
     dirty: set[int] = set()
     quiet: set[int] = set()
     moved = 0
+    held: dict = {}  # vertex -> (gain, scored), made on a state nothing of it changed since
     while waiting:
         chunk = _independent_prefix(engine, waiting)
-        proposals = {v: (gain, scored) for v, gain, scored in engine.propose_moves(chunk)}
+        if len(chunk) < SPECULATE:
+            chunk = waiting[:SPECULATE]
+        fresh = [v for v in chunk if v not in held]
+        held.update({v: (gain, scored) for v, gain, scored in engine.propose_moves(fresh)})
+        for v in fresh:
+            held.setdefault(v, (0.0, None))
         changed: set[int] = set()
         done = 0
         for v in chunk:
             if v in changed:
                 break
             done += 1
-            gain, scored = proposals.get(v, (0.0, None))
+            gain, scored = held.pop(v)
             if not gain < 0 or (veto is not None and not veto(*scored)):
                 continue
             change = engine.apply(*scored)
@@ -64,6 +77,8 @@ def relocate(engine, vertices, veto: Callable | None = None) -> Moves:
             dirty |= change.dirty
             quiet |= near
             moved += 1
+        for v in changed:
+            held.pop(v, None)
         waiting = waiting[done:]
     return Moves(dirty, quiet - dirty, moved)
 

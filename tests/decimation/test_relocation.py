@@ -12,7 +12,7 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from otjax.decimation.relocation import relocate
+from otjax.decimation.relocation import SPECULATE, relocate
 
 
 class Shift(NamedTuple):
@@ -94,28 +94,43 @@ def test_a_pass_is_the_sequential_visit_in_order(x, data):
     applied = [v for r in engine.applied for v, _ in r]
     assert engine.x == want_x  # bitwise: same proposals on the same states
     assert applied == want_order and moved == len(applied)
-    # Each call proposes a run of waiting vertices no two of which are
-    # neighbours or share a movable neighbour (a pinned vertex passes no change on).
+    # Every vertex is proposed, in order, and again only after a move next to
+    # it (applied in the round of its last proposal or later) made that stale.
     wanted = [v for v in dict.fromkeys(vertices) if engine.movable(v)]
-    assert [v for r in engine.rounds for v in r] == wanted  # every vertex proposed once, in order
-    for r in engine.rounds:
-        for i, a in enumerate(r):
-            for b in r[:i]:
-                assert abs(a - b) > 1 and not (abs(a - b) == 2 and engine.movable((a + b) // 2)), (a, b)
+    first = {}
+    for i, r in enumerate(engine.rounds):
+        assert len(set(r)) == len(r)
+        for v in r:
+            if v in first:
+                moves = [u for a in engine.applied[first[v]:i] for u, _ in a]
+                assert any(abs(u - v) <= 1 for u in moves), (v, first[v], i)
+            first[v] = i
+    assert list(first) == wanted
+    # A call ends at a move or after at least SPECULATE waiting vertices.
+    assert len(engine.rounds) <= len(applied) + -(-len(wanted) // SPECULATE)
     assert dirty == {u for v in applied for u in (v - 1, v, v + 1) if engine.movable(u)}
 
 
 def test_far_apart_vertices_share_one_call():
+    engine = PathMover([0.0] * 30)
+    far = [3, 6, 9, 12, 15, 18, 21, 24, 27]
+    relocate(engine, far)
+    assert engine.rounds == [far]  # longer than SPECULATE: the independent run
+
+
+def test_near_vertices_are_proposed_together_and_used_while_valid():
     engine = PathMover([0.0, 0.0, 1.0, 5.0, 0.0, 0.0, 3.0, 0.0, 0.0, 2.0, 0.0, 0.0])
     dirty, _, moved = relocate(engine, [3, 6, 9, 1])
-    assert engine.rounds == [[3, 6, 9], [1]] and moved == 4  # 1 is two edges from 3
+    # 1 is two edges from 3, but 3's move leaves 1's proposal as it was: one call.
+    assert engine.rounds == [[3, 6, 9, 1]] and moved == 4
+    assert [v for r in engine.applied for v, _ in r] == [3, 6, 9, 1]
 
 
-def test_neighbours_wait_for_the_move_before_them():
+def test_a_move_drops_the_proposals_it_made_stale():
     engine = PathMover([0.0, 1.0, 5.0, 0.0, 0.0])
     seen = []
     dirty, _, moved = relocate(engine, [1, 2, 3], lambda m, g: seen.append(m.vertex) or m.vertex != 1)
-    assert engine.rounds == [[1], [2], [3]]  # each within two edges of the one before
+    assert engine.rounds == [[1, 2, 3], [3]]  # 2's move made 3's first proposal stale
     assert [v for r in engine.applied for v, _ in r] == [2, 3] and moved == 2
     assert seen == [1, 2, 3] and dirty == {1, 2, 3}
 
@@ -124,5 +139,5 @@ def test_nothing_to_move():
     engine = PathMover([0.0, 0.0, 0.0, 0.0])
     assert relocate(engine, []) == (set(), set(), 0) and engine.rounds == []
     assert relocate(engine, [0, 3, 9]) == (set(), set(), 0) and engine.rounds == []  # immovable only
-    # Already in place: no gain, nothing moves, one call (1 and 2 are neighbours: two).
-    assert relocate(engine, [1, 2]) == (set(), set(), 0) and engine.rounds == [[1], [2]]
+    # Already in place: no gain, nothing moves, one call.
+    assert relocate(engine, [1, 2]) == (set(), set(), 0) and engine.rounds == [[1, 2]]
