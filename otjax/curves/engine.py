@@ -38,6 +38,10 @@ from otjax.curves.triangulation import Triangulation
 # Collapses whose stencil has fewer rows are scored again in full rather than
 # updated on their link (docs/decisions.md#update_min_rows).
 UPDATE_MIN_ROWS = 512
+# A relocation call proposes at least this many waiting vertices, near ones
+# included: a closed-form proposal costs less than a kernel call
+# (docs/decisions.md#relocation_batch).
+SPECULATE = 8
 
 
 class Scored(NamedTuple):
@@ -77,6 +81,8 @@ class CurveEngine:
       >>> len(delta) > 0
       True
     """
+
+    speculate = SPECULATE
 
     def __init__(self, tri: Triangulation, points: np.ndarray, mass: np.ndarray, *, dtype=np.float64,
                  max_source_degree: int = 32, incremental: bool = True, update_min_rows: int = UPDATE_MIN_ROWS):

@@ -53,11 +53,13 @@ class Engine(Protocol):
     (vertices whose scores the change left as they were although a coarser
     rule would call them dirty: their versions did not change, and the loop
     enters their scores again beside the dirty ones', in the same order). ``propose_moves``
-    returns ``[(vertex, delta, scored)]`` for :func:`otjax.decimation.relocation.relocate`.
+    returns ``[(vertex, delta, scored)]`` for :func:`otjax.decimation.relocation.relocate`,
+    which proposes at least ``speculate`` vertices a call.
     """
 
     versions: Sequence[int]
     degree_bound: int
+    speculate: int
 
     def live_sources(self) -> list[int]: ...
     def ring(self, v: int) -> tuple[int, ...]: ...

@@ -6,11 +6,6 @@ from typing import Callable, NamedTuple
 
 import numpy as np
 
-# A call proposes at least this many waiting vertices, near ones included:
-# a proposal stays valid until a move changes something of its vertex
-# (docs/decisions.md#relocation_batch).
-SPECULATE = 8
-
 
 class Moves(NamedTuple):
     """What a pass of :func:`relocate` did: ``dirty`` vertices (their stencils
@@ -30,17 +25,18 @@ def relocate(engine, vertices, veto: Callable | None = None) -> Moves:
     made and scored on the state the moves before it left; the work is
     batched: the proposals of a prefix of the waiting vertices that lie
     more than two edges apart (paths through immovable vertices do not
-    count), or of the next :data:`SPECULATE` if that prefix is shorter, are
-    made and scored in one call, then applied in order. A vertex that an
+    count), or of the next ``engine.speculate`` if that prefix is shorter,
+    are made and scored in one call, then applied in order. A vertex that an
     applied move made dirty (or quiet) ends the prefix: its proposal is
     dropped and the next call resumes there, proposing again only the
-    vertices without a proposal still valid.
+    vertices without a proposal still valid. Speculating pays where a call
+    costs more than a proposal (docs/decisions.md#relocation_batch).
 
     Args:
       engine: gives ``movable(v)``, ``propose_moves(vertices) -> [(vertex,
-        gain, scored)]`` (scored against the current state) and
+        gain, scored)]`` (scored against the current state),
         ``apply(*scored)`` returning a change with ``dirty`` (and optionally
-        ``quiet``).
+        ``quiet``), and ``speculate`` (an int, at least 1).
       vertices: vertex ids (duplicates and immovable ones are skipped).
       veto: optional ``(*scored) -> bool`` admissibility filter.
 
@@ -54,8 +50,8 @@ def relocate(engine, vertices, veto: Callable | None = None) -> Moves:
     held: dict = {}  # vertex -> (gain, scored), made on a state nothing of it changed since
     while waiting:
         chunk = _independent_prefix(engine, waiting)
-        if len(chunk) < SPECULATE:
-            chunk = waiting[:SPECULATE]
+        if len(chunk) < engine.speculate:
+            chunk = waiting[:engine.speculate]
         fresh = [v for v in chunk if v not in held]
         held.update({v: (gain, scored) for v, gain, scored in engine.propose_moves(fresh)})
         for v in fresh:

@@ -111,6 +111,11 @@ class SurfaceEngine:
       >>> stats = decimate(engine, 10, queue="multiple-choice")  # doctest: +SKIP
     """
 
+    # Relocation calls propose only the vertices no earlier move can reach:
+    # a proposal is a local LP, dropped ones would cost more than the calls
+    # they save (docs/decisions.md#relocation_batch).
+    speculate = 1
+
     def __init__(self, plan: SurfacePlan, *, method: str = "auto", options: NewtonOptions = NewtonOptions(),
                  degree_bound: int = DEGREE_BOUND, relocation_rounds: int = ROUNDS, damping: float = DAMPING):
         self.plan = plan

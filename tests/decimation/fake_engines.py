@@ -60,6 +60,7 @@ class CycleEngine:
       beyond: what to make of the vertex beyond each end of a change's ring
         (its score did not change): ``None`` nothing, ``"dirty"`` bump its
         version and report it dirty, ``"quiet"`` report it quiet.
+      speculate: vertices a relocation call proposes at least.
 
     Costs: ``delta(v, w) = weight[v] * (area(prev, v, next) + |v w| / 10)``,
     positive and, for random positions, without ties. A move sends ``v``
@@ -69,8 +70,9 @@ class CycleEngine:
     """
 
     def __init__(self, xy, pinned=(), degree_bound: int = 2, meddle: bool = False, report_meddled: bool = True,
-                 beyond: str | None = None):
+                 beyond: str | None = None, speculate: int = 1):
         self.xy = [tuple(map(float, p)) for p in xy]
+        self.speculate = speculate
         n = len(self.xy)
         self.nxt = {v: (v + 1) % n for v in range(n)}
         self.prv = {v: (v - 1) % n for v in range(n)}

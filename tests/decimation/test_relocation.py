@@ -12,7 +12,8 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from otjax.decimation.relocation import SPECULATE, relocate
+from otjax.curves.engine import SPECULATE
+from otjax.decimation.relocation import relocate
 
 
 class Shift(NamedTuple):
@@ -22,7 +23,10 @@ class Shift(NamedTuple):
 
 class PathMover:
     """Values ``x`` on the path ``0 - 1 - ... - n-1``; the ends and ``pinned``
-    never move; a vertex in ``content`` proposes a move that gains nothing."""
+    never move; a vertex in ``content`` proposes a move that gains nothing.
+    It speculates as the curve engine does."""
+
+    speculate = SPECULATE
 
     def __init__(self, x, pinned=(), content=()):
         self.x = [float(v) for v in x]
