@@ -3,9 +3,11 @@
 A :class:`KernelPipeline` owns what a run of kernel calls shares: the
 pool of :class:`~otjax.batch.fields.PackedBuffers` (a call's buffers go
 back to the pool once its results are read), the policy that maps a
-batch's need to a compiled shape, and the record of the shapes used and
-calls made. :meth:`KernelPipeline.dispatch` does not wait: JAX runs the
-call while the host exports the next batch.
+batch's need to a compiled shape, the kernel at each shape (read back from
+an exported module while JAX's compilation cache is on, see
+:mod:`otjax.batch.exported`) and the record of the shapes used and calls
+made. :meth:`KernelPipeline.dispatch` does not wait: JAX runs the call
+while the host exports the next batch.
 """
 
 from __future__ import annotations
@@ -72,7 +74,8 @@ class KernelPipeline:
     Args:
       spec: the kernel's input :class:`~otjax.batch.fields.FieldSpec`.
       kernel: ``kernel(floats, ints, rows=r, dtype=dtype) -> outputs``, jitted
-        with ``rows`` and ``dtype`` static.
+        with ``rows`` and ``dtype`` static; its outputs serialisable by
+        :mod:`jax.export` (arrays, tuples, registered NamedTuples).
       policy: the :class:`ShapePolicy`.
       dtype: float dtype of the kernel's cost arithmetic (an argument of every
         call, never a global switch).
