@@ -81,10 +81,9 @@ def reconstruct_curve(points, masses=None, n_vertices: int | None = None, *, tol
       final_relocations: relocation passes over every vertex at the end (fewer if a pass moves none).
       refine: after the closed form, refine all vertex positions by L-BFGS on the fixed-assignment cost
         (kept only if the cost does not rise).
-      queue: ``None``: :func:`default_queue`; ``"exhaustive"`` (every half-edge scored, the paper's
-        default), ``"multiple-choice"`` (paper §3.5: the best of ``choices`` random half-edges per step,
-        exhaustive below 5x the target) or ``"parallel"`` (independent sets of cheap collapses per round;
-        not in the paper). See :func:`otjax.curves.decimate.decimate`.
+      queue: ``None``: :func:`default_queue`; ``"exhaustive"`` (the paper's default), ``"multiple-choice"``
+        (paper §3.5: the best of ``choices`` random half-edges per step, exhaustive below 5x the target),
+        ``"parallel"`` or ``"lazy"`` (not in the paper): see :mod:`otjax.decimation.loop`.
       choices: half-edges drawn per multiple-choice step (paper: typically 10; docs/decisions.md#choices).
       round_fraction: parallel queue: a round collapses at most this fraction of the collapses still to do
         (docs/decisions.md#round_fraction).

@@ -45,6 +45,9 @@ class ScoreTable:
         # version is stale too.
         self._stamp = itertools.count()
         self._compact_at = COMPACT_MIN
+        # Lazy queue: heap items of stale entries are kept (they stand for
+        # their source until it is scored again).
+        self.keep_stale = False
 
     def fresh(self, key: Key) -> bool:
         """Whether ``key`` has a score at its source's current version."""
@@ -85,13 +88,26 @@ class ScoreTable:
             return key
         return None
 
+    def pop_any(self, live: Callable[[int], bool]) -> tuple[Key, bool] | None:
+        """The cheapest current entry whose source is ``live`` (removed from
+        the heap) and whether it is fresh, or ``None``. An entry replaced
+        since its item was pushed is skipped; one whose source changed since
+        it was scored is returned as stale."""
+        while self.heap:
+            _, _, key, ver, stamp = heapq.heappop(self.heap)
+            entry = self.entries.get(key)
+            if entry is None or entry[2] != stamp or not live(key[0]):
+                continue
+            return key, ver == self.versions[key[0]]
+        return None
+
     def _compact(self) -> None:
         """Drops the stale heap items (stale for good: versions and stamps only grow)."""
         entries, versions = self.entries, self.versions
         kept = []
         for item in self.heap:
             entry = entries.get(item[2])
-            if entry is not None and entry[2] == item[4] and item[3] == versions[item[2][0]]:
+            if entry is not None and entry[2] == item[4] and (self.keep_stale or item[3] == versions[item[2][0]]):
                 kept.append(item)
         heapq.heapify(kept)
         self.heap = kept

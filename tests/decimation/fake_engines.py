@@ -289,6 +289,42 @@ def greedy_oracle(engine: CycleEngine, target: int | None, relocate_last: int = 
     return engine
 
 
+def lazy_oracle(engine: CycleEngine, target: int, relocate_last: int = 0) -> CycleEngine:
+    """The lazy greedy by brute force: each source keeps the scores of its
+    last scoring; before each collapse, every source whose version changed
+    since and that holds a score below the cheapest current one is scored
+    again, until none is (one without a score counts as below every
+    other); then the cheapest current score is collapsed."""
+    held: dict[int, dict[int, float]] = {}
+    at: dict[int, int] = {}
+
+    def rescore(v):
+        held[v] = {w: d for d, (u, w) in engine.eligible() if u == v}
+        at[v] = engine.versions[v]
+
+    for v in engine.live_sources():
+        rescore(v)
+    while len(engine.live_sources()) > target:
+        live = engine.live_sources()
+        fresh = [(d, (v, w)) for v in live if at[v] == engine.versions[v] for w, d in held[v].items()]
+        best = min(fresh, default=(math.inf, None))
+        below = [v for v in live if at[v] != engine.versions[v] and min(held[v].values(), default=-math.inf) < best[0]]
+        if below:
+            for v in below:
+                rescore(v)
+            continue
+        if best[1] is None:
+            break
+        v, w = best[1]
+        ring = engine.ring(v)
+        engine.apply(Collapse(v, w), best[0], engine.versions[v])
+        if len(engine.live_sources()) - target < relocate_last:
+            for u in sorted(ring):
+                if engine.movable(u):
+                    engine.apply(*engine.proposal(u))
+    return engine
+
+
 class GraphEngine:
     """What sampling reads of an engine: ``ring``, ``free``, ``degree_bound``,
     over given rings (no geometry)."""

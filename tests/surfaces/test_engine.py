@@ -96,7 +96,7 @@ def test_scores_outside_the_dirty_set_do_not_change():
     assert any(after.get(h) != pytest.approx(d, rel=1e-6) for h, d in before.items() if h[0] in change.dirty)
 
 
-@pytest.mark.parametrize("queue", ["exhaustive", "multiple-choice", "parallel"])
+@pytest.mark.parametrize("queue", ["exhaustive", "multiple-choice", "parallel", "lazy"])
 def test_decimate_drives_the_engine_to_the_target(queue):
     plan = sphere_plan(seed=2, n_vertices=12, n_points=60, min_bins=1)
     engine = SurfaceEngine(plan, method="exact")
