@@ -84,8 +84,8 @@ def _curve_parser(sub) -> argparse.ArgumentParser:
     p.add_argument("--final-relocations", type=int, metavar="P", help="relocation passes at the end")
     p.add_argument("--refine", action="store_true", default=None, help="refine vertices by gradient descent")
     p.add_argument("--queue", choices=QUEUES,
-                   help="collapse order: exhaustive, multiple-choice, parallel, lazy (default: exhaustive up to "
-                   f"{EXHAUSTIVE_COLLAPSES} collapses, multiple-choice above)")
+                   help="collapse order: exhaustive, multiple-choice, parallel, lazy (default: lazy up to "
+                   f"{EXHAUSTIVE_COLLAPSES} collapses, exhaustive without a target, multiple-choice above)")
     p.add_argument("--choices", type=int, metavar="K", help="multiple-choice: half-edges drawn per step (15)")
     p.add_argument("--initial-vertices", type=int, metavar="V",
                    help="random subset of the points used as initial vertices (default: automatic)")

@@ -316,13 +316,16 @@ def default_initial_vertices(n_points: int, n_vertices: int | None) -> int:
 
 
 def default_queue(initial_vertices: int, n_vertices: int | None) -> str:
-    """Queue used when ``queue`` is not given: ``"exhaustive"`` for runs of at
-    most :data:`EXHAUSTIVE_COLLAPSES` collapses (``initial_vertices -
-    n_vertices``; tolerance mode counts all of them), ``"multiple-choice"``
-    above, where it is about twice as fast for the same cost
-    (docs/decisions.md#default_queue)."""
+    """Queue used when ``queue`` is not given: for runs of at most
+    :data:`EXHAUSTIVE_COLLAPSES` collapses (``initial_vertices -
+    n_vertices``; tolerance mode counts all of them), ``"lazy"`` (its last
+    collapses exhaustive) given a target, ``"exhaustive"`` in pure
+    tolerance mode; ``"multiple-choice"`` above, where it is about twice as
+    fast for the same cost (docs/decisions.md#default_queue)."""
     collapses = initial_vertices - (n_vertices or 0)
-    return "exhaustive" if collapses <= EXHAUSTIVE_COLLAPSES else "multiple-choice"
+    if collapses > EXHAUSTIVE_COLLAPSES:
+        return "multiple-choice"
+    return "exhaustive" if n_vertices is None else "lazy"
 
 
 # Canonical distances are below the pinned box's diagonal (< 4): any larger tolerance vetoes

@@ -11,9 +11,10 @@ geometry; four queues:
 :func:`run_lazy`
   not in the paper: as exhaustive, but a dirty half-edge keeps its old score
   on the heap until it comes up, and is scored again only then (with every
-  other stale one that comes up before the cheapest fresh score). Most
-  changes leave most dirty scores as they were or raise them: far fewer
-  scorings, for a collapse order that differs where a cost fell.
+  other stale one that comes up before the cheapest fresh score), until the
+  last ``lazy_tail`` collapses, which are exhaustive. Most changes leave
+  most dirty scores as they were or raise them: far fewer scorings, for a
+  collapse order that differs where a cost fell.
 :func:`run_multiple_choice`
   paper §3.5: each step draws ``choices`` half-edges uniformly at random,
   scores those without a fresh score in one batched call, and collapses the
@@ -44,6 +45,9 @@ QUEUES = ("exhaustive", "multiple-choice", "parallel", "lazy")
 # Parallel rounds look at most this many times their budget down the queue
 # (docs/decisions.md#parallel_scan).
 PARALLEL_SCAN = 2
+# The lazy queue hands the last this many collapses to the exhaustive one
+# (docs/decisions.md#lazy_tail).
+LAZY_TAIL = 200
 
 
 class Engine(Protocol):
@@ -228,12 +232,14 @@ def run_exhaustive(run: Run) -> None:
         run.stats.rounds += 1
 
 
-def run_lazy(run: Run) -> None:
+def run_lazy(run: Run, tail: int) -> None:
     """Scores every half-edge, then collapses the cheapest fresh one, as
     :func:`run_exhaustive`, except that a change does not score the dirty
     half-edges again: each keeps its old score on the heap, and the sources
     of the stale entries that come up before the cheapest fresh one are
-    scored again together, until a fresh entry comes up first.
+    scored again together, until a fresh entry comes up first. The last
+    ``tail`` collapses (of a run with a known end) are
+    :func:`run_exhaustive`'s.
 
     So the collapse applied is the cheapest by scores that are current or,
     for half-edges a change touched since, as they were; where a change
@@ -257,9 +263,11 @@ def run_lazy(run: Run) -> None:
             table.discard((v, w) for w in held[v] - targets)
             held[v] = targets
 
-    score_again(live.ids)
+    end = run.target + tail if run.known_end else run.target
+    if len(live) > end:
+        score_again(live.ids)
     waiting: set[int] = set()
-    while len(live) > run.target:
+    while len(live) > end:
         stale = waiting
         while (item := table.pop_any(live.__contains__)) is not None and not item[1]:
             stale.add(item[0][0])
@@ -276,6 +284,8 @@ def run_lazy(run: Run) -> None:
         # Quiet vertices kept their versions: their heap items still hold.
         run.quiet = set()
         run.stats.rounds += 1
+    table.keep_stale = False
+    run_exhaustive(run)
 
 
 def run_multiple_choice(run: Run, rng: np.random.Generator, choices: int, switch_factor: float) -> None:
@@ -362,7 +372,7 @@ def run_parallel(run: Run, round_fraction: float) -> None:
 
 def decimate(engine: Engine, n_vertices: int | None = None, *, queue: str = "exhaustive", choices: int = 15,
              switch_factor: float = 5.0, round_fraction: float = 0.05, seed: int = 0, relocation: int = 0,
-             veto: Callable | None = None, progress: bool = False) -> DecimationStats:
+             lazy_tail: int = LAZY_TAIL, veto: Callable | None = None, progress: bool = False) -> DecimationStats:
     """Applies collapses greedily until ``n_vertices`` remain or none is admissible.
 
     Args:
@@ -379,6 +389,8 @@ def decimate(engine: Engine, n_vertices: int | None = None, *, queue: str = "exh
       seed: seed of the random draws (multiple choice) and tie order (parallel).
       relocation: relocate the ring of each of the last ``relocation``
         collapses (needs ``n_vertices``).
+      lazy_tail: lazy queue: the last this many collapses are the
+        exhaustive queue's (with ``n_vertices``).
       veto: optional ``(candidate, cost) -> bool`` admissibility filter.
       progress: show a tqdm progress bar.
 
@@ -395,6 +407,8 @@ def decimate(engine: Engine, n_vertices: int | None = None, *, queue: str = "exh
         raise ValueError(f"choices must be >= 1, got {choices}")
     if not 0 < round_fraction <= 1:
         raise ValueError(f"round_fraction must be in (0, 1], got {round_fraction}")
+    if lazy_tail < 0:
+        raise ValueError(f"lazy_tail must be >= 0, got {lazy_tail}")
     target = n_vertices if n_vertices is not None else 1
     rng = np.random.default_rng(seed)
     table = ScoreTable(engine.versions, rng if queue == "parallel" else None)
@@ -413,7 +427,7 @@ def decimate(engine: Engine, n_vertices: int | None = None, *, queue: str = "exh
     elif queue == "parallel":
         run_parallel(run, round_fraction)
     elif queue == "lazy":
-        run_lazy(run)
+        run_lazy(run, lazy_tail)
     else:
         run_exhaustive(run)
     if bar is not None:

@@ -244,11 +244,13 @@ def test_the_automatic_filter_removes_outlier_edges():
 
 
 def test_the_size_rule_picks_the_documented_queue():
-    assert default_queue(EXHAUSTIVE_COLLAPSES + 10, 10) == "exhaustive"
+    assert default_queue(EXHAUSTIVE_COLLAPSES + 10, 10) == "lazy"
     assert default_queue(EXHAUSTIVE_COLLAPSES + 11, 10) == "multiple-choice"
-    assert default_queue(EXHAUSTIVE_COLLAPSES, None) == "exhaustive"
+    assert default_queue(EXHAUSTIVE_COLLAPSES, None) == "exhaustive"  # tolerance mode: no known end
+    assert default_queue(EXHAUSTIVE_COLLAPSES + 1, None) == "multiple-choice"
     pts, _ = datasets.star(100, noise=0.01)
-    assert otjax.reconstruct_curve(pts, n_vertices=10).params["queue"] == "exhaustive"
+    assert otjax.reconstruct_curve(pts, n_vertices=10).params["queue"] == "lazy"
+    assert otjax.reconstruct_curve(pts, tolerance=0.01).params["queue"] == "exhaustive"
     assert otjax.reconstruct_curve(pts, n_vertices=10, queue="parallel").params["queue"] == "parallel"
 
 
@@ -259,6 +261,6 @@ def test_the_size_rule_picks_the_documented_queue():
 ])
 def test_the_initial_subset_rule(n_points, target, expected):
     assert default_initial_vertices(n_points, target) == expected
-    # The documented queue follows: exhaustive for every default run of a 10-vertex target.
+    # The documented queue follows: lazy for every default run of a 10-vertex target.
     if target == 10:
-        assert default_queue(expected, target) == "exhaustive"
+        assert default_queue(expected, target) == "lazy"

@@ -289,12 +289,13 @@ def greedy_oracle(engine: CycleEngine, target: int | None, relocate_last: int = 
     return engine
 
 
-def lazy_oracle(engine: CycleEngine, target: int, relocate_last: int = 0) -> CycleEngine:
+def lazy_oracle(engine: CycleEngine, target: int, relocate_last: int = 0, tail: int = 0) -> CycleEngine:
     """The lazy greedy by brute force: each source keeps the scores of its
     last scoring; before each collapse, every source whose version changed
     since and that holds a score below the cheapest current one is scored
     again, until none is (one without a score counts as below every
-    other); then the cheapest current score is collapsed."""
+    other); then the cheapest current score is collapsed. The last ``tail``
+    collapses are :func:`greedy_oracle`'s."""
     held: dict[int, dict[int, float]] = {}
     at: dict[int, int] = {}
 
@@ -302,9 +303,10 @@ def lazy_oracle(engine: CycleEngine, target: int, relocate_last: int = 0) -> Cyc
         held[v] = {w: d for d, (u, w) in engine.eligible() if u == v}
         at[v] = engine.versions[v]
 
-    for v in engine.live_sources():
-        rescore(v)
-    while len(engine.live_sources()) > target:
+    if len(engine.live_sources()) > target + tail:
+        for v in engine.live_sources():
+            rescore(v)
+    while len(engine.live_sources()) > target + tail:
         live = engine.live_sources()
         fresh = [(d, (v, w)) for v in live if at[v] == engine.versions[v] for w, d in held[v].items()]
         best = min(fresh, default=(math.inf, None))
@@ -322,7 +324,7 @@ def lazy_oracle(engine: CycleEngine, target: int, relocate_last: int = 0) -> Cyc
             for u in sorted(ring):
                 if engine.movable(u):
                     engine.apply(*engine.proposal(u))
-    return engine
+    return greedy_oracle(engine, target, relocate_last)
 
 
 class GraphEngine:

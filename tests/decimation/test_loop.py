@@ -166,15 +166,17 @@ def test_a_stale_score_is_never_applied(seed, report):
 def test_lazy_collapses_as_the_brute_force_lazy_greedy(seed, n, data):
     """Same collapses and moves, in the same order, as a brute force that
     keeps each source's last scores and scores a changed source again only
-    when one of them is below the cheapest current score; also when a change
+    when one of them is below the cheapest current score, then takes the
+    exhaustive greedy's last ``tail`` collapses; also when a change
     bumps versions beyond its ring without changing costs, or raises the
     cost of the next collapse behind the loop's back (reported)."""
     target = data.draw(st.integers(1, n - 3 - 1))
     relocation = data.draw(st.integers(0, 6))
+    tail = data.draw(st.sampled_from([0, 0, 1, 5, n]))
     options = data.draw(st.sampled_from([{}, {"beyond": "dirty"}, {"beyond": "quiet"}, {"meddle": True}]))
     engine = random_cycle(seed, n, speculate=data.draw(st.sampled_from([1, 3, 8])), **options)
-    stats = decimate(engine, target, queue="lazy", relocation=relocation)
-    want = lazy_oracle(random_cycle(seed, n, **options), target, relocation)
+    stats = decimate(engine, target, queue="lazy", relocation=relocation, lazy_tail=tail)
+    want = lazy_oracle(random_cycle(seed, n, **options), target, relocation, tail)
     assert moves_grouped(engine.events) == moves_grouped(want.events)
     assert len(engine.live_sources()) == target or not engine.eligible()
     assert stats.collapses == len(engine.collapses()) and stats.rounds == stats.collapses
@@ -190,7 +192,7 @@ def test_lazy_scores_fewer_than_exhaustive_and_differs_where_a_cost_fell():
     scored, differ = [], 0
     for seed in range(10):
         lazy, full = random_cycle(seed, 60), random_cycle(seed, 60)
-        decimate(lazy, 8, queue="lazy")
+        decimate(lazy, 8, queue="lazy", lazy_tail=0)
         decimate(full, 8)
         assert len(lazy.live_sources()) == len(full.live_sources()) == 8
         scored.append((lazy.n_scored, full.n_scored))
@@ -328,6 +330,7 @@ def test_parallel_relocation_waits_for_the_round():
     ({"n_vertices": 5, "choices": 0}, "choices must be >= 1"),
     ({"n_vertices": 5, "round_fraction": 0.0}, "round_fraction"),
     ({"n_vertices": 5, "round_fraction": 1.5}, "round_fraction"),
+    ({"n_vertices": 5, "lazy_tail": -1}, "lazy_tail must be >= 0"),
 ])
 def test_bad_arguments_are_named(kwargs, message):
     engine = random_cycle(0, 12)
