@@ -23,7 +23,7 @@ from otjax import datasets
 from otjax.cli_surfaces import add_surface_parsers
 from otjax.compile_cache import default_cache_dir, enable_compilation_cache
 from otjax.curves.decimate import QUEUES
-from otjax.curves.reconstruct import EXHAUSTIVE_COLLAPSES, reconstruct_curve
+from otjax.curves.reconstruct import EXHAUSTIVE_COLLAPSES, LAZY_COLLAPSES, reconstruct_curve
 from otjax.curves.result import SAVE_EXTENSIONS
 from otjax.io import IMAGE_EXTENSIONS, TEXT_EXTENSIONS, check_output_paths, read_points, write_files
 from otjax.validation import MAX_POINTS, check_points, check_target
@@ -84,8 +84,8 @@ def _curve_parser(sub) -> argparse.ArgumentParser:
     p.add_argument("--final-relocations", type=int, metavar="P", help="relocation passes at the end")
     p.add_argument("--refine", action="store_true", default=None, help="refine vertices by gradient descent")
     p.add_argument("--queue", choices=QUEUES,
-                   help="collapse order: exhaustive, multiple-choice, parallel, lazy (default: lazy up to "
-                   f"{EXHAUSTIVE_COLLAPSES} collapses, exhaustive without a target, multiple-choice above)")
+                   help="collapse order: exhaustive, multiple-choice, parallel, lazy (default by collapses: exhaustive "
+                   f"up to {LAZY_COLLAPSES}, lazy up to {EXHAUSTIVE_COLLAPSES} with a target, multiple-choice above)")
     p.add_argument("--choices", type=int, metavar="K", help="multiple-choice: half-edges drawn per step (15)")
     p.add_argument("--initial-vertices", type=int, metavar="V",
                    help="random subset of the points used as initial vertices (default: automatic)")

@@ -36,6 +36,7 @@ BACKGROUNDS = ("auto", "none")
 INITIAL_FLOOR = 2000
 INITIAL_PER_VERTEX = 20
 EXHAUSTIVE_COLLAPSES = 4000
+LAZY_COLLAPSES = 1500
 # During a run the youngest GC generation is collected every this many
 # allocations rather than every 700: the decimation makes millions of small
 # tuples, and every collection also runs JAX's GC hook and, every tenth,
@@ -316,16 +317,16 @@ def default_initial_vertices(n_points: int, n_vertices: int | None) -> int:
 
 
 def default_queue(initial_vertices: int, n_vertices: int | None) -> str:
-    """Queue used when ``queue`` is not given: for runs of at most
-    :data:`EXHAUSTIVE_COLLAPSES` collapses (``initial_vertices -
-    n_vertices``; tolerance mode counts all of them), ``"lazy"`` (its last
-    collapses exhaustive) given a target, ``"exhaustive"`` in pure
-    tolerance mode; ``"multiple-choice"`` above, where it is about twice as
-    fast for the same cost (docs/decisions.md#default_queue)."""
+    """Queue used when ``queue`` is not given, by the run's collapses
+    (``initial_vertices - n_vertices``; tolerance mode counts all of them):
+    ``"exhaustive"`` up to :data:`LAZY_COLLAPSES`, ``"lazy"`` (its last
+    collapses exhaustive) up to :data:`EXHAUSTIVE_COLLAPSES` given a target
+    (``"exhaustive"`` without one), ``"multiple-choice"`` above, where it is
+    about twice as fast for the same cost (docs/decisions.md#default_queue)."""
     collapses = initial_vertices - (n_vertices or 0)
     if collapses > EXHAUSTIVE_COLLAPSES:
         return "multiple-choice"
-    return "exhaustive" if n_vertices is None else "lazy"
+    return "lazy" if n_vertices is not None and collapses > LAZY_COLLAPSES else "exhaustive"
 
 
 # Canonical distances are below the pinned box's diagonal (< 4): any larger tolerance vetoes

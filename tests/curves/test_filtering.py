@@ -10,7 +10,7 @@ import otjax
 from otjax import datasets, metrics
 from otjax.background import estimate_background
 from otjax.curves import filtering
-from otjax.curves.reconstruct import default_initial_vertices, default_queue, EXHAUSTIVE_COLLAPSES
+from otjax.curves.reconstruct import EXHAUSTIVE_COLLAPSES, LAZY_COLLAPSES, default_initial_vertices, default_queue
 from tests.profiles import examples  # CI count, thorough count (--hypothesis-profile=thorough)
 
 
@@ -244,13 +244,14 @@ def test_the_automatic_filter_removes_outlier_edges():
 
 
 def test_the_size_rule_picks_the_documented_queue():
+    assert default_queue(LAZY_COLLAPSES + 10, 10) == "exhaustive"
+    assert default_queue(LAZY_COLLAPSES + 11, 10) == "lazy"
     assert default_queue(EXHAUSTIVE_COLLAPSES + 10, 10) == "lazy"
     assert default_queue(EXHAUSTIVE_COLLAPSES + 11, 10) == "multiple-choice"
     assert default_queue(EXHAUSTIVE_COLLAPSES, None) == "exhaustive"  # tolerance mode: no known end
     assert default_queue(EXHAUSTIVE_COLLAPSES + 1, None) == "multiple-choice"
     pts, _ = datasets.star(100, noise=0.01)
-    assert otjax.reconstruct_curve(pts, n_vertices=10).params["queue"] == "lazy"
-    assert otjax.reconstruct_curve(pts, tolerance=0.01).params["queue"] == "exhaustive"
+    assert otjax.reconstruct_curve(pts, n_vertices=10).params["queue"] == "exhaustive"
     assert otjax.reconstruct_curve(pts, n_vertices=10, queue="parallel").params["queue"] == "parallel"
 
 
@@ -261,6 +262,6 @@ def test_the_size_rule_picks_the_documented_queue():
 ])
 def test_the_initial_subset_rule(n_points, target, expected):
     assert default_initial_vertices(n_points, target) == expected
-    # The documented queue follows: lazy for every default run of a 10-vertex target.
+    # The documented queue follows for a 10-vertex target: exhaustive up to 1510 points, lazy above.
     if target == 10:
-        assert default_queue(expected, target) == "lazy"
+        assert default_queue(expected, target) == ("lazy" if n_points > 1510 else "exhaustive")
