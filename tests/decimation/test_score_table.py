@@ -113,38 +113,57 @@ def test_pop_order_is_score_then_push_order_over_fresh_live_keys(data):
     assert t.pop(lambda v: True) is None  # stale and dead entries were consumed
 
 
+def rounds_of(n: int):
+    """Rounds of (scores entered, sources bumped, whether one pop follows)."""
+    return st.lists(st.tuples(
+        st.lists(st.tuples(st.tuples(st.integers(0, n - 1), st.integers(0, n - 1)),
+                           st.sampled_from([0.0, 0.5, 1.0, -2.0])), max_size=12),
+        st.sets(st.integers(0, n - 1)), st.booleans()), min_size=1, max_size=8)
+
+
+def replay(rounds, n: int, compact_min: int, lazy: bool) -> list:
+    """Plays ``rounds`` on a fresh table that sweeps its heap from
+    ``compact_min`` items on, then pops it empty; returns what came up, in
+    order (keys from ``pop``; with ``lazy``, ``(key, fresh)`` from
+    ``pop_any`` over a table that keeps stale items)."""
+    import otjax.decimation.score_table as module
+
+    saved = module.COMPACT_MIN
+    module.COMPACT_MIN = compact_min
+    try:
+        t, versions = table(n)
+        t.keep_stale = lazy
+        out = []
+
+        def take():
+            item = t.pop_any(lambda v: True) if lazy else t.pop(lambda v: True)
+            if item is not None:
+                out.append(item)
+                t.discard([item[0] if lazy else item])
+            return item
+
+        for batch, bumped, pop_one in rounds:
+            t.enter(list(dict(batch).items()), order=lambda k: (-k[1], k[0]))  # one score a key per batch
+            for v in bumped:
+                versions[v] += 1
+            if pop_one:
+                take()
+        while take() is not None:
+            pass
+        return out
+    finally:
+        module.COMPACT_MIN = saved
+
+
 @settings(max_examples=100, deadline=None)
 @given(data=st.data())
 def test_sweeping_stale_heap_items_changes_no_pop(data):
     """Re-scored keys leave stale items behind; sweeping them out of the heap
     (as often as after every batch) pops the same keys in the same order as
     never sweeping."""
-    import otjax.decimation.score_table as module
-
     n = data.draw(st.integers(1, 8))
-    rounds = data.draw(st.lists(st.tuples(
-        st.lists(st.tuples(st.tuples(st.integers(0, n - 1), st.integers(0, n - 1)),
-                           st.sampled_from([0.0, 0.5, 1.0, -2.0])), max_size=12),
-        st.sets(st.integers(0, n - 1)), st.booleans()), min_size=1, max_size=8))
-    popped = []
-    for compact_min in (0, 10**9):
-        saved = module.COMPACT_MIN
-        module.COMPACT_MIN = compact_min
-        try:
-            t, versions = table(n)
-            out = []
-            for batch, bumped, pop_one in rounds:
-                batch = list(dict(batch).items())  # one score a key per batch
-                t.enter(batch, order=lambda k: (-k[1], k[0]))
-                for v in bumped:
-                    versions[v] += 1
-                if pop_one and (key := t.pop(lambda v: True)) is not None:
-                    out.append(key)
-                    t.discard([key])
-            popped.append(out + pop_all(t))
-        finally:
-            module.COMPACT_MIN = saved
-    assert popped[0] == popped[1]
+    rounds = data.draw(rounds_of(n))
+    assert replay(rounds, n, 0, lazy=False) == replay(rounds, n, 10**9, lazy=False)
 
 
 def test_pop_any_returns_stale_entries_as_such():
@@ -164,36 +183,11 @@ def test_sweeping_keeps_stale_items_for_the_lazy_queue(data):
     """With ``keep_stale``, sweeping drops only replaced and discarded
     items: ``pop_any`` returns the same keys, stale or fresh, in the same
     order as never sweeping."""
-    import otjax.decimation.score_table as module
-
     n = data.draw(st.integers(1, 8))
-    rounds = data.draw(st.lists(st.tuples(
-        st.lists(st.tuples(st.tuples(st.integers(0, n - 1), st.integers(0, n - 1)),
-                           st.sampled_from([0.0, 0.5, 1.0, -2.0])), max_size=12),
-        st.sets(st.integers(0, n - 1)), st.booleans()), min_size=1, max_size=8))
-    popped = []
-    for compact_min in (0, 10**9):
-        saved = module.COMPACT_MIN
-        module.COMPACT_MIN = compact_min
-        try:
-            t, versions = table(n)
-            t.keep_stale = True
-            out = []
-            for batch, bumped, pop_one in rounds:
-                t.enter(list(dict(batch).items()), order=lambda k: (-k[1], k[0]))
-                for v in bumped:
-                    versions[v] += 1
-                if pop_one and (item := t.pop_any(lambda v: True)) is not None:
-                    out.append(item)
-                    t.discard([item[0]])
-            while (item := t.pop_any(lambda v: True)) is not None:
-                out.append(item)
-                t.discard([item[0]])
-            popped.append(out)
-        finally:
-            module.COMPACT_MIN = saved
-    assert popped[0] == popped[1]
+    rounds = data.draw(rounds_of(n))
+    popped = replay(rounds, n, 0, lazy=True)
+    assert popped == replay(rounds, n, 10**9, lazy=True)
     # Every key entered comes up, none more often than it was entered.
     entered = Counter(k for batch, _, _ in rounds for k in dict(batch))
-    came_up = Counter(k for k, _ in popped[0])
+    came_up = Counter(k for k, _ in popped)
     assert set(came_up) == set(entered) and all(came_up[k] <= entered[k] for k in came_up)
