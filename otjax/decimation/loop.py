@@ -280,7 +280,7 @@ def run_lazy(run: Run, tail: int) -> None:
         if item is None:
             break
         dirty, _ = collapse(run, item[0])
-        waiting = {v for v in dirty if not held[v] and v in live}
+        waiting = {v for v in dirty if v in live and not held[v]}
         # Quiet vertices kept their versions: their heap items still hold.
         run.quiet = set()
         run.stats.rounds += 1
