@@ -77,15 +77,10 @@ class ScoreTable:
 
     def pop(self, live: Callable[[int], bool]) -> Key | None:
         """The cheapest fresh entry whose source is ``live`` (removed from the
-        heap), or ``None``."""
-        while self.heap:
-            _, _, key, ver, stamp = heapq.heappop(self.heap)
-            entry = self.entries.get(key)
-            if entry is None or entry[2] != stamp or ver != self.versions[key[0]]:
-                continue
-            if not live(key[0]):
-                continue
-            return key
+        heap), or ``None``; stale ones that come up first are dropped."""
+        while (item := self.pop_any(live)) is not None:
+            if item[1]:
+                return item[0]
         return None
 
     def pop_any(self, live: Callable[[int], bool]) -> tuple[Key, bool] | None:
