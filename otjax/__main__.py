@@ -2,6 +2,6 @@
 
 import sys
 
-from otjax.cli import main
+from otjax.cli import entry
 
-sys.exit(main())
+sys.exit(entry())

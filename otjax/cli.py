@@ -17,6 +17,7 @@ convention).
 from __future__ import annotations
 
 import argparse
+import gc
 import sys
 
 from otjax import datasets
@@ -232,5 +233,19 @@ def main(argv: list[str] | None = None) -> int:
         return 130
 
 
+def entry() -> int:
+    """The ``otjax`` process: :func:`main`, then a quick exit.
+
+    Freezing the collector's objects before the interpreter shuts down
+    spares it a last sweep over every object JAX and SciPy made at import
+    (docs/decisions.md#quick_exit).
+    Only for a process that ends here: a caller of :func:`main` keeps its
+    collector as it was.
+    """
+    status = main()
+    gc.freeze()
+    return status
+
+
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(entry())
