@@ -459,8 +459,8 @@ def test_python_m_otjax_help():
 
 def test_python_m_otjax_exits_with_the_status_of_main(tmp_path):
     """The process entry (which freezes the collector before exit) passes the status on."""
-    proc = subprocess.run([sys.executable, "-m", "otjax", "curve", str(tmp_path / "missing.xy"), "-n", "3"], check=False,
-                          capture_output=True, text=True, timeout=120)
+    args = [sys.executable, "-m", "otjax", "curve", str(tmp_path / "missing.xy"), "-n", "3"]
+    proc = subprocess.run(args, check=False, capture_output=True, text=True, timeout=120)
     assert proc.returncode == 1
     assert proc.stderr.count("\n") == 1 and proc.stderr.startswith("otjax: error:")
     assert "missing.xy" in proc.stderr
