@@ -39,7 +39,7 @@ from pathlib import Path
 import numpy as np
 
 SIZES = (1_000, 3_000, 10_000, 50_000, 200_000, 1_000_000)
-QUEUES = ("exhaustive", "multiple-choice", "parallel")
+QUEUES = ("exhaustive", "multiple-choice", "parallel", "lazy")
 OUTLIER_FRACTION = 0.1
 
 

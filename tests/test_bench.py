@@ -11,7 +11,7 @@ SCRIPT = Path(__file__).resolve().parent.parent / "scripts" / "bench_curves.py"
 
 
 def test_bench_curves_smallest_size(tmp_path):
-    """The smallest size the script accepts: each of its three cold runs still
+    """The smallest size the script accepts: each of its four cold runs (one a queue) still
     compiles its kernels and collapses down to the target, which is all the
     rows' fields need; a larger input only adds collapses."""
     out = tmp_path / "bench.json"
@@ -21,7 +21,7 @@ def test_bench_curves_smallest_size(tmp_path):
     assert "| n | queue |" in proc.stdout
     doc = json.loads(out.read_text())
     rows = doc["rows"]
-    assert {r["queue"] for r in rows} == {"exhaustive", "multiple-choice", "parallel"}
+    assert {r["queue"] for r in rows} == {"exhaustive", "multiple-choice", "parallel", "lazy"}
     for r in rows:
         assert r["n"] == 100 and r["n_vertices"] >= 1
         assert r["collapses"] == r["initial_vertices"] - r["target"]
@@ -32,7 +32,7 @@ def test_bench_curves_smallest_size(tmp_path):
         assert r["peak_rss_mib"] > 0 and r["total_cost"] > 0
         assert r["compile_cache"] == "cold"  # every run compiles unless --compile-cache is given
         assert r["machine_check"]["numpy_ms"] > 0 and r["machine_check"]["kernel_ms"] > 0
-    assert doc["fit_10k_1M"] == {"exhaustive": None, "multiple-choice": None, "parallel": None}
+    assert doc["fit_10k_1M"] == {"exhaustive": None, "multiple-choice": None, "parallel": None, "lazy": None}
 
 
 def test_bench_curves_rejects_bad_arguments():
