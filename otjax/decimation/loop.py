@@ -269,17 +269,17 @@ def run_lazy(run: Run, tail: int) -> None:
     waiting: set[int] = set()
     while len(live) > end:
         stale = waiting
-        while (item := table.pop_any(live.__contains__)) is not None and not item[1]:
-            stale.add(item[0][0])
+        while (item := table.pop_any(live.__contains__)) is not None and not item.fresh:
+            stale.add(item.key[0])
         if stale:
             if item is not None:
-                table.push(item[0])
+                table.push(item.key)
             score_again(stale)
             waiting = set()
             continue
         if item is None:
             break
-        dirty, _ = collapse(run, item[0])
+        dirty, _ = collapse(run, item.key)
         waiting = {v for v in dirty if v in live and not held[v]}
         # Quiet vertices kept their versions: their heap items still hold.
         run.quiet = set()

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import heapq
 import itertools
-from typing import Callable, Sequence
+from typing import Callable, NamedTuple, Sequence
 
 import numpy as np
 
@@ -22,6 +22,13 @@ Key = tuple[int, int]
 # ordered: the tie key and stamp are unique).
 COMPACT_FACTOR = 2
 COMPACT_MIN = 4096
+
+
+class Popped(NamedTuple):
+    """An entry taken off the heap by :meth:`ScoreTable.pop_any`."""
+
+    key: Key
+    fresh: bool  # scored at its source's current version
 
 
 class ScoreTable:
@@ -79,13 +86,13 @@ class ScoreTable:
         """The cheapest fresh entry whose source is ``live`` (removed from the
         heap), or ``None``; stale ones that come up first are dropped."""
         while (item := self.pop_any(live)) is not None:
-            if item[1]:
-                return item[0]
+            if item.fresh:
+                return item.key
         return None
 
-    def pop_any(self, live: Callable[[int], bool]) -> tuple[Key, bool] | None:
+    def pop_any(self, live: Callable[[int], bool]) -> Popped | None:
         """The cheapest current entry whose source is ``live`` (removed from
-        the heap) and whether it is fresh, or ``None``. An entry replaced
+        the heap), or ``None``. An entry replaced
         since its item was pushed is skipped; one whose source changed since
         it was scored is returned as stale."""
         while self.heap:
@@ -93,7 +100,7 @@ class ScoreTable:
             entry = self.entries.get(key)
             if entry is None or entry[2] != stamp or not live(key[0]):
                 continue
-            return key, ver == self.versions[key[0]]
+            return Popped(key, ver == self.versions[key[0]])
         return None
 
     def _compact(self) -> None:

@@ -139,7 +139,7 @@ def replay(rounds, n: int, compact_min: int, lazy: bool) -> list:
             item = t.pop_any(lambda v: True) if lazy else t.pop(lambda v: True)
             if item is not None:
                 out.append(item)
-                t.discard([item[0] if lazy else item])
+                t.discard([item.key if lazy else item])
             return item
 
         for batch, bumped, pop_one in rounds:
