@@ -11,7 +11,7 @@ SCRIPT = Path(__file__).resolve().parent.parent / "scripts" / "bench_curves.py"
 
 
 def test_bench_curves_smallest_size(tmp_path):
-    """The smallest size the script accepts: each of its four cold runs (one a queue) still
+    """The smallest size the script accepts: each of its four cold runs (one per queue) still
     compiles its kernels and collapses down to the target, which is all the
     rows' fields need; a larger input only adds collapses."""
     out = tmp_path / "bench.json"

@@ -92,9 +92,9 @@ class ScoreTable:
 
     def pop_any(self, live: Callable[[int], bool]) -> Popped | None:
         """The cheapest current entry whose source is ``live`` (removed from
-        the heap), or ``None``. An entry replaced
-        since its item was pushed is skipped; one whose source changed since
-        it was scored is returned as stale."""
+        the heap), or ``None``. An entry replaced since its item was pushed
+        is skipped; one whose source changed since it was scored is returned
+        with ``fresh`` false."""
         while self.heap:
             _, _, key, ver, stamp = heapq.heappop(self.heap)
             entry = self.entries.get(key)
