@@ -135,7 +135,7 @@ def machine_check() -> dict:
 
     x = np.random.default_rng(0).random(1 << 20)
     r = 1 << 15
-    floats, ints = (np.zeros(k) for k in scoring.FIELDS.layout(r)[1])
+    floats, ints = (np.zeros(k) for k in scoring.FIELDS[4].layout(r)[1])
     ints = ints.astype(np.int32)
 
     def kernel():

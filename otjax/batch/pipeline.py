@@ -73,19 +73,23 @@ class KernelPipeline:
 
     Args:
       spec: the kernel's input :class:`~otjax.batch.fields.FieldSpec`.
-      kernel: ``kernel(floats, ints, rows=r, dtype=dtype) -> outputs``, jitted
-        with ``rows`` and ``dtype`` static; its outputs serialisable by
+      kernel: ``kernel(floats, ints, rows=r, dtype=dtype, **static) ->
+        outputs``, jitted with those keywords static; its outputs serialisable by
         :mod:`jax.export` (arrays, tuples, registered NamedTuples).
       policy: the :class:`ShapePolicy`.
       dtype: float dtype of the kernel's cost arithmetic (an argument of every
         call, never a global switch).
+      static: the kernel's other static keyword arguments, the same in
+        every call.
     """
 
-    def __init__(self, spec: FieldSpec, kernel: Callable, policy: ShapePolicy, dtype=np.float64):
+    def __init__(self, spec: FieldSpec, kernel: Callable, policy: ShapePolicy, dtype=np.float64,
+                 static: dict | None = None):
         self.spec = spec
         self.kernel = kernel
         self.policy = policy
         self.dtype = dtype
+        self.static = dict(static or {})
         self.calls = 0
         self.shapes_seen: set[int] = set()
         self._pool: dict[int, list[PackedBuffers]] = {}
@@ -116,8 +120,8 @@ class KernelPipeline:
         self.calls += 1
         call = self._calls.get(r)
         if call is None:
-            call = self._calls[r] = exported_kernel(self.kernel, {"rows": r, "dtype": self.dtype},
-                                                    (buffers.floats, buffers.ints))
+            static = {"rows": r, "dtype": self.dtype, **self.static}
+            call = self._calls[r] = exported_kernel(self.kernel, static, (buffers.floats, buffers.ints))
         return Handle(call(buffers.floats, buffers.ints), buffers)
 
     def wait(self, handle: Handle) -> tuple:

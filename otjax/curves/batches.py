@@ -17,14 +17,15 @@ from otjax.curves.host_batch import HostBatch
 from otjax.curves.stencils import CandidateStencil
 
 
-def packed_batches(jobs, plan, budget: int = scoring.ROW_BUDGET):
-    """The jobs as batches packed into few capacities
-    (:func:`~otjax.batch.packing.choose_packing`), left for the kernel to
-    locate; a generator (the jobs are listed at the first batch), each
-    batch's ``seq`` saying where its jobs stand in ``jobs``."""
+def packed_batches(jobs, plan, layout: scoring.Layout, budget: int | None = None):
+    """The jobs as batches packed into few capacities of ``layout``
+    (:func:`~otjax.batch.packing.choose_packing`; ``budget`` rows a call,
+    default the layout's), left for the kernel to locate; a generator (the
+    jobs are listed at the first batch), each batch's ``seq`` saying where
+    its jobs stand in ``jobs``."""
     jobs = list(jobs)
-    packing = choose_packing([job.size() for job in jobs], budget, scoring.capacity, scoring.SHAPES.shape_for,
-                             scoring.MIN_ROWS)
+    packing = choose_packing([job.size() for job in jobs], budget or layout.budget, layout.capacity,
+                             scoring.SHAPES.shape_for, scoring.MIN_ROWS)
     for members in packing:
         batch = export_jobs([jobs[i] for i in members], plan, on_host=False)
         batch.seq = np.asarray(members, np.int64)

@@ -89,7 +89,7 @@ class CurveEngine:
         self.plan = TransportPlan(tri, points, mass)
         self.log = ChangeLog(len(tri.xy))
         self.stencils = StencilCache(self.plan, self.log, max_source_degree)
-        self.scorer = Scorer(self.plan.points, self.plan.mass, dtype)
+        self.scorer = Scorer(self.plan.points, self.plan.mass, dtype, tri.n_vertices)
         self.links = LinkUpdates(self.plan, self.log, self.stencils)
         self.records = LinkRecords(self.links)
         self.hot = HotStencils()
@@ -308,11 +308,11 @@ class CurveEngine:
             yield from self.stencils.collapse_jobs(sources, targets)
             yield from extra
 
-        return packed_batches(jobs(), self.plan, budget or self.scorer.row_budget)
+        return packed_batches(jobs(), self.plan, self.scorer.layout, budget)
 
     def relocation_exports(self, moves, budget: int | None = None):
         """:meth:`exports` for ``(v, position)`` moves (those that keep the embedding)."""
-        return packed_batches(self.stencils.move_jobs(moves), self.plan, budget or self.scorer.row_budget)
+        return packed_batches(self.stencils.move_jobs(moves), self.plan, self.scorer.layout, budget)
 
     def export(self, sources, targets: dict | None = None) -> HostBatch:
         """The half-edges leaving ``sources`` as one flat batch, left for the kernel to locate."""

@@ -2,8 +2,8 @@
 
 A :class:`HostBatch` holds candidates, rows, edges and triangles of many
 jobs end to end (unpadded, ids of any width) and what reading the kernel's
-results needs; :meth:`HostBatch.values` is what the
-:data:`~otjax.curves.scoring.FIELDS` layout packs. :mod:`otjax.curves.export`
+results needs; :meth:`HostBatch.values` is what a
+:class:`~otjax.curves.scoring.Layout`'s fields pack. :mod:`otjax.curves.export`
 makes them from jobs, :mod:`otjax.curves.batches` from located candidates.
 """
 
@@ -82,14 +82,15 @@ class HostBatch:
             job_theta=np.zeros(nj), job_ears=np.full((nj, scoring.MAX_EARS), -1, np.int64),
             before=np.zeros(nj) if before is None else before)
 
-    def need(self) -> int:
-        """The smallest row capacity that fits this batch (:func:`scoring.capacity`)."""
-        return scoring.capacity(len(self.row_point), len(self.edge_job), len(self.tri_edges),
-                                len(self.job_theta))
+    def need(self, layout: scoring.Layout) -> int:
+        """The smallest row capacity that fits this batch in ``layout``
+        (:func:`scoring.capacity`)."""
+        return layout.capacity(len(self.row_point), len(self.edge_job), len(self.tri_edges),
+                               len(self.job_theta))
 
     def values(self, points: np.ndarray, mass: np.ndarray) -> dict:
-        """The batch as :data:`scoring.FIELDS` values, the rows' points and
-        masses gathered from ``points (n, 2)`` and ``mass (n,)``."""
+        """The batch as values of a :class:`scoring.Layout`'s fields, the rows'
+        points and masses gathered from ``points (n, 2)`` and ``mass (n,)``."""
         return {
             "row_xy": Gather(points, self.row_point), "row_mass": Gather(mass, self.row_point),
             "row_job": self.row_job, "row_cand": self.row_cand, "row_locate": self.row_locate,

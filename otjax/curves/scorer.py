@@ -38,20 +38,23 @@ class Scorer:
       mass: ``(n,)`` float64 masses.
       dtype: float dtype of the cost arithmetic (location is float64 whatever
         this is).
+      n_vertices: vertices of the initial triangulation (default ``n``).
 
-    Its calls are filled to ``row_budget`` rows
-    (:func:`~otjax.curves.scoring.row_budget` of the number of points).
+    Its calls are shaped by :attr:`layout` (:func:`~otjax.curves.scoring.layout_for`)
+    and filled to its ``budget`` rows (:attr:`row_budget`).
 
     Which rows the kernel locates changes no score: a located row is the
     exact perturbed location wherever it is found.
     """
 
-    def __init__(self, points: np.ndarray, mass: np.ndarray, dtype=np.float64):
+    def __init__(self, points: np.ndarray, mass: np.ndarray, dtype=np.float64, n_vertices: int | None = None):
         self.points = points
         self.mass = mass
         self.point_rows = np.ascontiguousarray(points.T)
-        self.pipeline = KernelPipeline(scoring.FIELDS, scoring.score_packed, scoring.SHAPES, dtype)
-        self.row_budget = scoring.row_budget(len(points))
+        self.layout = scoring.layout_for(len(points), n_vertices or len(points))
+        self.pipeline = KernelPipeline(self.layout.fields, scoring.score_packed, scoring.SHAPES, dtype,
+                                       static={"edges_per_row": self.layout.edges_per_row})
+        self.row_budget = self.layout.budget
         self.location_kernel_used = False
         # Locate batches on the host before their call (see PROBE).
         self.host_first = False
@@ -86,7 +89,7 @@ class Scorer:
                 locate_on_host(batch, np.arange(len(batch.row_start) - 1), self.points, self.point_rows,
                                HOST_FIRST_MIN_PAIRS)
         self.note(batch)
-        return self.pipeline.dispatch(batch.values(self.points, self.mass), batch.need())
+        return self.pipeline.dispatch(batch.values(self.points, self.mass), batch.need(self.layout))
 
     def _wait(self, batch: HostBatch, handle: Handle) -> tuple:
         return cut_outputs(batch, self.pipeline.wait(handle))
@@ -168,7 +171,7 @@ class Scorer:
             while first < len(parts):
                 rows = np.cumsum(counts[first:])
                 last = first + max(1, int(np.searchsorted(rows, budget, side="right")))
-                last = min(last, first + budget // scoring.EDGES_PER_ROW - 1)
+                last = min(last, first + budget // self.layout.edges_per_row - 1)
                 ids = np.concatenate([a for p in parts[first:last] for a in p]).astype(np.int64)
                 edge_of_row = np.repeat(np.arange(last - first), counts[first:last])
                 yield HostBatch.without_triangles(

@@ -57,7 +57,9 @@ SHAPES = ShapePolicy(MIN_ROWS, ROW_BUDGET, TINY_ROWS)
 # Inputs of at most this many points fill their calls to MIN_ROWS only
 # (docs/decisions.md#small_input_rows).
 SMALL_INPUT_POINTS = 20_000
-EDGES_PER_ROW = 4  # E = T = R / 4
+# Runs starting from at most this many points per vertex shape their calls
+# for stencils of about two rows per edge (docs/decisions.md#EDGES_PER_ROW).
+DENSE_VERTICES = 2
 JOBS_PER_ROW = 16  # J = R / 16
 RETRY_PER_ROW = 4  # rows whose guess fails: at most R / 4 get the second test
 # Flipped-out triangles ("ears") tested in the kernel; a job with more is
@@ -73,7 +75,8 @@ SECTOR_STEPS = 8
 class FlatBatch(NamedTuple):
     """Candidates laid end to end, padded to one capacity (see :func:`capacity`).
 
-    Shapes: ``R`` rows, ``E = T = R / 4`` edges and triangles, ``J = R / 16``
+    Shapes: ``R`` rows, ``E = T = R / k`` edges and triangles (``k`` the
+    :class:`Layout`'s ``edges_per_row``), ``J = R / 16``
     jobs. Indices are flat (into this batch's arrays); padding rows, edges
     and jobs are masked or point at the last (padding) job.
 
@@ -129,66 +132,102 @@ class FlatBatch(NamedTuple):
 THREE_QUARTER_FROM = 1 << 15
 
 
-def capacity(rows: int, edges: int, triangles: int, jobs: int) -> int:
-    """Row capacity ``R`` that fits a batch of these sizes: a power of two,
-    or above :data:`THREE_QUARTER_FROM` also ``3/4`` of one.
+def capacity(rows: int, edges: int, triangles: int, jobs: int, edges_per_row: int = 4) -> int:
+    """Row capacity ``R`` that fits a batch of these sizes when a call holds
+    ``R / edges_per_row`` edges and triangles: a power of two, or above
+    :data:`THREE_QUARTER_FROM` also ``3/4`` of one.
 
     Jobs get ``R / 16`` slots and one of them is kept for padding, hence the
     ``jobs + 1``.
     """
-    need = max(rows, EDGES_PER_ROW * max(edges, triangles), JOBS_PER_ROW * (jobs + 1), TINY_ROWS)
+    need = max(rows, edges_per_row * max(edges, triangles), JOBS_PER_ROW * (jobs + 1), TINY_ROWS)
     r = 1 << (need - 1).bit_length()
     if r > THREE_QUARTER_FROM and need <= 3 * r // 4:
         return 3 * r // 4
     return r
 
 
-def row_budget(n_points: int) -> int:
-    """Rows the calls of a run on ``n_points`` input points are filled to:
-    :data:`MIN_ROWS` up to :data:`SMALL_INPUT_POINTS`, else :data:`ROW_BUDGET`.
-
-    A small run then never compiles (or, with the compilation cache, traces
-    and loads) the :data:`ROW_BUDGET` shape unless one candidate needs it.
-
-    Example:
-      >>> row_budget(3000) == MIN_ROWS, row_budget(50_000) == ROW_BUDGET
-      (True, True)
-    """
-    return MIN_ROWS if n_points <= SMALL_INPUT_POINTS else ROW_BUDGET
-
-
 def _pad_job(r: int) -> int:
     return r // JOBS_PER_ROW - 1
 
 
-# The layout of a packed :class:`FlatBatch`, written once: field order, dtype
-# kind, shape at row capacity ``r``, pad value (padding rows and edges belong
-# to the last job, which no batch uses), and the axis a batch fills.
-FIELDS = FieldSpec([
-    Field("row_xy", "float", Dims(tail=(2,))),
-    Field("row_mass", "float", Dims()),
-    Field("row_job", "int", Dims(), pad=_pad_job),
-    Field("row_cand", "int", Dims(tail=(3,))),
-    Field("row_locate", "bool", Dims()),
-    Field("row_valid", "bool", Dims()),
-    Field("tri_xy", "float", Dims(EDGES_PER_ROW, head=(6,))),
-    Field("tri_edges", "int", Dims(EDGES_PER_ROW, tail=(3,))),
-    Field("fan_key", "float", Dims(EDGES_PER_ROW), pad=np.inf),
-    Field("fan_tri", "int", Dims(EDGES_PER_ROW)),
-    Field("job_fan", "int", Dims(JOBS_PER_ROW, plus=1)),
-    Field("job_apex", "float", Dims(JOBS_PER_ROW, tail=(2,))),
-    Field("job_theta", "float", Dims(JOBS_PER_ROW)),
-    Field("job_ears", "int", Dims(JOBS_PER_ROW, tail=(MAX_EARS,)), pad=-1),
-    Field("edge_xy", "float", Dims(EDGES_PER_ROW, tail=(2, 2))),
-    Field("edge_valid", "bool", Dims(EDGES_PER_ROW)),
-    Field("edge_job", "int", Dims(EDGES_PER_ROW), pad=_pad_job),
-])
-assert tuple(f.name for f in FIELDS.fields) == FlatBatch._fields
+def _fields(edges_per_row: int) -> FieldSpec:
+    """The layout of a packed :class:`FlatBatch` with ``R / edges_per_row``
+    edges and triangles, written once: field order, dtype kind, shape at row
+    capacity ``r``, pad value (padding rows and edges belong to the last job,
+    which no batch uses), and the axis a batch fills."""
+    per = edges_per_row
+    return FieldSpec([
+        Field("row_xy", "float", Dims(tail=(2,))),
+        Field("row_mass", "float", Dims()),
+        Field("row_job", "int", Dims(), pad=_pad_job),
+        Field("row_cand", "int", Dims(tail=(3,))),
+        Field("row_locate", "bool", Dims()),
+        Field("row_valid", "bool", Dims()),
+        Field("tri_xy", "float", Dims(per, head=(6,))),
+        Field("tri_edges", "int", Dims(per, tail=(3,))),
+        Field("fan_key", "float", Dims(per), pad=np.inf),
+        Field("fan_tri", "int", Dims(per)),
+        Field("job_fan", "int", Dims(JOBS_PER_ROW, plus=1)),
+        Field("job_apex", "float", Dims(JOBS_PER_ROW, tail=(2,))),
+        Field("job_theta", "float", Dims(JOBS_PER_ROW)),
+        Field("job_ears", "int", Dims(JOBS_PER_ROW, tail=(MAX_EARS,)), pad=-1),
+        Field("edge_xy", "float", Dims(per, tail=(2, 2))),
+        Field("edge_valid", "bool", Dims(per)),
+        Field("edge_job", "int", Dims(per), pad=_pad_job),
+    ])
 
 
-def unpack(floats, ints, r: int) -> FlatBatch:
-    """The :class:`FlatBatch` views of a batch packed by :data:`FIELDS` at capacity ``r``."""
-    return FlatBatch(**FIELDS.unpack(floats, ints, r))
+# The two layouts' fields, by edges per row.
+FIELDS = {per: _fields(per) for per in (2, 4)}
+assert all(tuple(f.name for f in spec.fields) == FlatBatch._fields for spec in FIELDS.values())
+
+
+class Layout(NamedTuple):
+    """How a run's scoring calls are shaped (their row capacities are
+    :data:`SHAPES`'s).
+
+    Attributes:
+      edges_per_row: a call of ``R`` rows holds ``E = T = R / edges_per_row``
+        edges and triangles (and ``J = R / 16`` jobs).
+      budget: the rows a call of the decimation loop is filled to.
+    """
+
+    edges_per_row: int
+    budget: int
+
+    @property
+    def fields(self) -> FieldSpec:
+        """The packed layout of this shape's batches."""
+        return FIELDS[self.edges_per_row]
+
+    def capacity(self, rows: int, edges: int, triangles: int, jobs: int) -> int:
+        """:func:`capacity` in this layout."""
+        return capacity(rows, edges, triangles, jobs, self.edges_per_row)
+
+
+def layout_for(n_points: int, n_vertices: int) -> Layout:
+    """The :class:`Layout` of a run on ``n_points`` input points from
+    ``n_vertices`` initial vertices.
+
+    Calls are filled to :data:`MIN_ROWS` rows up to
+    :data:`SMALL_INPUT_POINTS` points, so that a small run skips the
+    :data:`ROW_BUDGET` shape unless one candidate needs it, and to
+    :data:`ROW_BUDGET` above. They hold ``R / 2`` edges when the run starts
+    from at most :data:`DENSE_VERTICES` points a vertex (its stencils hold
+    about one point a triangle, two rows an edge), ``R / 4`` otherwise.
+
+    Example:
+      >>> [tuple(layout_for(n, v)) for n, v in ((1000, 1000), (10_000, 2000), (50_000, 2000))]
+      [(2, 4096), (4, 4096), (4, 32768)]
+    """
+    budget = MIN_ROWS if n_points <= SMALL_INPUT_POINTS else ROW_BUDGET
+    return Layout(2 if n_points <= DENSE_VERTICES * n_vertices else 4, budget)
+
+
+def unpack(floats, ints, r: int, edges_per_row: int = 4) -> FlatBatch:
+    """The :class:`FlatBatch` views of a batch packed by ``FIELDS[edges_per_row]`` at capacity ``r``."""
+    return FlatBatch(**FIELDS[edges_per_row].unpack(floats, ints, r))
 
 
 def pseudo_angle(dx, dy, xp=np):
@@ -313,7 +352,7 @@ def score_flat(batch: FlatBatch, dtype=jnp.float64, retry_per_row: int = RETRY_P
     return Scores(total, per_edge, res.assignment, loc, bad)
 
 
-@functools.partial(jax.jit, static_argnames=("rows", "dtype"))
-def score_packed(floats: jax.Array, ints: jax.Array, rows: int, dtype=jnp.float64):
-    """:func:`score_flat` of the batch packed by :data:`FIELDS` at capacity ``rows``."""
-    return score_flat.__wrapped__(unpack(floats, ints, rows), dtype)
+@functools.partial(jax.jit, static_argnames=("rows", "dtype", "edges_per_row"))
+def score_packed(floats: jax.Array, ints: jax.Array, rows: int, dtype=jnp.float64, edges_per_row: int = 4):
+    """:func:`score_flat` of the batch packed by ``FIELDS[edges_per_row]`` at capacity ``rows``."""
+    return score_flat.__wrapped__(unpack(floats, ints, rows, edges_per_row), dtype)

@@ -42,11 +42,12 @@ def test_the_scoring_kernel_exported_and_read_back_gives_the_same_bits(cache_dir
     with jax.enable_x64(True):
         engine = CurveEngine(Triangulation(pts[::2]), pts, mass)
         batch = engine.export(list(range(0, 150, 7)))
-        rows = scoring.SHAPES.shape_for(batch.need())
-        buffers = PackedBuffers(scoring.FIELDS, rows)
+        layout = engine.scorer.layout
+        rows = scoring.SHAPES.shape_for(batch.need(layout))
+        buffers = PackedBuffers(layout.fields, rows)
         buffers.fill(batch.values(pts, mass))
         args = (buffers.floats, buffers.ints)
-        static = {"rows": rows, "dtype": np.float64}
+        static = {"rows": rows, "dtype": np.float64, "edges_per_row": layout.edges_per_row}
         plain = scoring.score_packed(*args, **static)
         first = exported_kernel(scoring.score_packed, static, args)(*args)  # exports the entry
         again = exported_kernel(scoring.score_packed, static, args)(*args)  # reads it back

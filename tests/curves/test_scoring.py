@@ -30,9 +30,9 @@ from tests.point_sets import make_points
 log = logging.getLogger(__name__)
 
 
-def packed(batch, plan, r):
-    """``(floats, ints)`` of ``batch`` in fresh buffers at capacity ``r``."""
-    buf = PackedBuffers(scoring.FIELDS, r)
+def packed(batch, plan, r, layout):
+    """``(floats, ints)`` of ``batch`` in fresh buffers of ``layout`` at capacity ``r``."""
+    buf = PackedBuffers(layout.fields, r)
     buf.fill(batch.values(plan.points, plan.mass))
     return buf.floats, buf.ints
 
@@ -64,9 +64,10 @@ def test_retry_rounds_locate_what_one_round_cannot_take():
     plan = engine.plan
     sources = free_vertices(engine)
     flat = next(engine.exports(sources))
-    r = flat.need()
-    batch = scoring.unpack(*packed(flat, plan, r), r)
-    wide = scoring.unpack(*packed(flat, plan, 2 * r), 2 * r)
+    layout = engine.scorer.layout
+    r = flat.need(layout)
+    batch = scoring.unpack(*packed(flat, plan, r, layout), r, layout.edges_per_row)
+    wide = scoring.unpack(*packed(flat, plan, 2 * r, layout), 2 * r, layout.edges_per_row)
     with jax.enable_x64(True):
         want = jax.device_get(scoring.score_flat(batch))
         got = jax.device_get(scoring.score_flat(batch, retry_per_row=r))  # rounds of one row
@@ -173,18 +174,18 @@ def test_relocation_batches_equal_located_relocations():
     assert all(c.plan.source == c.plan.target == c.plan.vertex and c.plan.flipped_out == () for c in cands)
 
 
-@settings(max_examples=40, deadline=None)
+@settings(max_examples=100, deadline=None)
 @given(rows=st.integers(0, 300_000), edges=st.integers(0, 80_000), tris=st.integers(0, 80_000),
-       jobs=st.integers(0, 20_000))
-def test_capacity_is_the_smallest_class_that_fits(rows, edges, tris, jobs):
+       jobs=st.integers(0, 20_000), per=st.sampled_from([2, 4]))
+def test_capacity_is_the_smallest_class_that_fits(rows, edges, tris, jobs, per):
     """Classes: powers of two from TINY_ROWS, and above THREE_QUARTER_FROM also
     three quarters of one; the capacity is the least class whose slots hold
-    the batch (R rows, R/4 edges and triangles, R/16 jobs, one kept)."""
+    the batch (R rows, R/per edges and triangles, R/16 jobs, one kept)."""
     classes = sorted({scoring.TINY_ROWS << k for k in range(14)}
                      | {3 * (scoring.TINY_ROWS << k) // 4 for k in range(14)
                         if 3 * (scoring.TINY_ROWS << k) // 4 > scoring.THREE_QUARTER_FROM})
-    fits = [c for c in classes if rows <= c and max(edges, tris) <= c // 4 and jobs + 1 <= c // 16]
-    assert scoring.capacity(rows, edges, tris, jobs) == fits[0]
+    fits = [c for c in classes if rows <= c and max(edges, tris) <= c // per and jobs + 1 <= c // 16]
+    assert scoring.Layout(per, scoring.MIN_ROWS).capacity(rows, edges, tris, jobs) == fits[0]
 
 
 def test_reused_buffers_hold_what_fresh_ones_would():
@@ -197,19 +198,20 @@ def test_reused_buffers_hold_what_fresh_ones_would():
     flats = [next(engine.exports(sorted(rng.choice(sources, k, replace=False).tolist())))
              for k in (40, 1, 12, 3, 25, 1, 40)]
     flats.append(next(engine.relocation_exports([(v, plan.tri.xy[v] * (1 + 1e-9)) for v in sources[:5]])))
-    r = max(f.need() for f in flats)
+    layout = engine.scorer.layout
+    r = max(f.need(layout) for f in flats)
     assert len({len(f.row_point) for f in flats}) >= 6  # they do differ in size
-    reused = PackedBuffers(scoring.FIELDS, r)
+    reused = PackedBuffers(layout.fields, r)
     for flat in flats:
         reused.fill(flat.values(plan.points, plan.mass))
-        want = packed(flat, plan, r)
+        want = packed(flat, plan, r, layout)
         np.testing.assert_array_equal(reused.floats, want[0])
         np.testing.assert_array_equal(reused.ints, want[1])
     # A fresh one holds zeros but for the padding values.
-    fresh = PackedBuffers(scoring.FIELDS, r)
+    fresh = PackedBuffers(layout.fields, r)
     assert fresh.floats.ctypes.data % 64 == 0 and fresh.ints.ctypes.data % 64 == 0
     with pytest.raises(ValueError, match="capacity"):
-        PackedBuffers(scoring.FIELDS, r // 2).fill(
+        PackedBuffers(layout.fields, r // 2).fill(
             next(engine.exports(sources, budget=1 << 20)).values(plan.points, plan.mass))
 
 
@@ -278,16 +280,17 @@ def test_batches_fill_the_capacity_of_their_largest_candidate():
     engine = make_engine(np.random.default_rng(3), n=30_000, subset=0.0015)
     sources = free_vertices(engine)
     budget = scoring.MIN_ROWS
+    layout = engine.scorer.layout
     alone = {}
     for c in engine.candidates(sources):
-        alone[c.plan.source, c.plan.target] = scoring.capacity(len(c.point_ids), 2 * len(c.plan.new_triangles) + 1,
-                                                              len(c.plan.new_triangles), 1)
+        alone[c.plan.source, c.plan.target] = layout.capacity(
+            len(c.point_ids), 2 * len(c.plan.new_triangles) + 1, len(c.plan.new_triangles), 1)
     assert max(alone.values()) > budget  # the case under test
     flats = list(engine.exports(sources, budget=budget))
     merged = 0
     for flat in flats:
         own = max(alone[c.plan.source, c.plan.target] for c in flat.cands)
-        assert flat.need() <= max(budget, own)
+        assert flat.need(layout) <= max(budget, own)
         merged += own > budget and len(flat.cands) > 1
     assert merged >= 1
     # Same candidates as one batch per source, each once; seq gives their
@@ -325,14 +328,23 @@ def test_compiled_shapes_stay_few_over_2000_collapses():
 
 def test_small_inputs_fill_calls_to_the_smaller_shape_and_score_the_same(monkeypatch):
     """Up to SMALL_INPUT_POINTS points, calls are filled to MIN_ROWS rows
-    (more calls than at ROW_BUDGET); the reconstruction is the same bit for bit."""
-    assert [scoring.row_budget(n) for n in (10, scoring.SMALL_INPUT_POINTS, scoring.SMALL_INPUT_POINTS + 1)] == [
-        scoring.MIN_ROWS, scoring.MIN_ROWS, scoring.ROW_BUDGET]
+    (more calls than at ROW_BUDGET); from at most two points a vertex they
+    hold R/2 edges, not R/4. The reconstruction is the same bit for bit."""
+    most = scoring.SMALL_INPUT_POINTS
+    cases = [(10, 10), (most, most // 2), (most, most // 2 - 1), (most + 1, most + 1), (most + 1, 2000)]
+    assert [tuple(scoring.layout_for(n, v)) for n, v in cases] == [
+        (2, scoring.MIN_ROWS), (2, scoring.MIN_ROWS), (4, scoring.MIN_ROWS), (2, scoring.ROW_BUDGET),
+        (4, scoring.ROW_BUDGET)]
     pts, _ = datasets.star(900, noise=0.01, seed=3)
     small = reconstruct_curve(pts, n_vertices=10, seed=1)
+    monkeypatch.setattr(scoring, "DENSE_VERTICES", 0)
+    quarter = reconstruct_curve(pts, n_vertices=10, seed=1)
     monkeypatch.setattr(scoring, "SMALL_INPUT_POINTS", 0)
     large = reconstruct_curve(pts, n_vertices=10, seed=1)
-    assert small.history["kernel_calls"] > large.history["kernel_calls"]  # the budgets did differ
-    np.testing.assert_array_equal(small.vertices, large.vertices)
-    np.testing.assert_array_equal(small.edges, large.edges)
-    assert small.total_cost == large.total_cost
+    # The layouts did differ: fewer calls with more edges per call, fewer with a larger budget.
+    assert quarter.history["kernel_calls"] > small.history["kernel_calls"]
+    assert quarter.history["kernel_calls"] > large.history["kernel_calls"]
+    for other in (quarter, large):
+        np.testing.assert_array_equal(small.vertices, other.vertices)
+        np.testing.assert_array_equal(small.edges, other.edges)
+        assert small.total_cost == other.total_cost
