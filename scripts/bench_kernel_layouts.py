@@ -24,6 +24,7 @@ import json
 import os
 import platform
 import time
+from typing import NamedTuple
 
 import numpy as np
 
@@ -33,9 +34,18 @@ INPUTS = ("star:0.01:1000:10", "skyline:0.01:2000:18", "star:0.01:3000:10", "sta
 FORCE = {"R/4": 0, "R/2": 1 << 30}
 
 
+class KeptCall(NamedTuple):
+    """One recorded kernel call: its packed buffers and static arguments."""
+
+    floats: np.ndarray
+    ints: np.ndarray
+    rows: int
+    static: dict
+
+
 def record(spec: str, dense: int, every: int):
-    """``(result, calls, kept)`` of one run with ``scoring.DENSE_VERTICES = dense``;
-    ``kept``: ``(floats, ints, rows, static)`` of every ``every``-th call."""
+    """``(result, kept)`` of one run with ``scoring.DENSE_VERTICES = dense``;
+    ``kept``: the :class:`KeptCall` of every ``every``-th kernel call."""
     import otjax
     from otjax import datasets
     from otjax.batch import pipeline
@@ -51,7 +61,7 @@ def record(spec: str, dense: int, every: int):
         count[0] += 1
         if count[0] % every == 0:
             b = handle.buffers
-            kept.append((np.array(b.floats), np.array(b.ints), b.r, dict(self.static)))
+            kept.append(KeptCall(np.array(b.floats), np.array(b.ints), b.r, dict(self.static)))
         return handle
 
     saved = scoring.DENSE_VERTICES
@@ -62,7 +72,7 @@ def record(spec: str, dense: int, every: int):
     finally:
         pipeline.KernelPipeline.dispatch = dispatch
         scoring.DENSE_VERTICES = saved
-    return result, result.history["kernel_calls"], kept
+    return result, kept
 
 
 def replay(kept: dict, passes: int) -> dict:
@@ -71,12 +81,12 @@ def replay(kept: dict, passes: int) -> dict:
 
     from otjax.curves import scoring
 
-    def call(c):
-        jax.block_until_ready(scoring.score_packed(c[0], c[1], rows=c[2], **c[3]))
+    def call(c: KeptCall):
+        jax.block_until_ready(scoring.score_packed(c.floats, c.ints, rows=c.rows, **c.static))
 
     for calls in kept.values():  # every shape compiled before timing
-        for r in {c[2]: c for c in calls}.values():
-            call(r)
+        for c in {c.rows: c for c in calls}.values():
+            call(c)
     total = dict.fromkeys(kept, 0.0)
     longest = max(len(c) for c in kept.values())
     for _ in range(passes):
@@ -110,13 +120,13 @@ def main(argv=None) -> int:
     for spec in args.inputs:
         runs = {name: record(spec, dense, args.every) for name, dense in FORCE.items()}
         first = runs["R/4"][0]
-        for name, (res, _, _) in runs.items():
+        for name, (res, _) in runs.items():
             if not (np.array_equal(res.vertices, first.vertices) and np.array_equal(res.edges, first.edges)):
                 raise SystemExit(f"{spec}: layout {name} changed the reconstruction")
-        seconds = replay({name: run[2] for name, run in runs.items()}, args.passes)
+        seconds = replay({name: kept for name, (_, kept) in runs.items()}, args.passes)
         n, nv = (int(x) for x in spec.split(":")[2:])
         default = f"R/{scoring.layout_for(n, default_initial_vertices(n, nv)).edges_per_row}"
-        row = {"input": spec, "calls": {k: v[1] for k, v in runs.items()},
+        row = {"input": spec, "calls": {k: res.history["kernel_calls"] for k, (res, _) in runs.items()},
                "kernel_seconds": {k: args.every * v for k, v in seconds.items()}, "default": default}
         rows.append(row)
         print(f"| {spec} | {row['calls']['R/4']} / {row['calls']['R/2']} | {row['kernel_seconds']['R/4']:.2f} | "

@@ -303,7 +303,7 @@ class CurveEngine:
     def exports(self, sources, targets: dict | None = None, budget: int | None = None, extra=()):
         """:func:`~otjax.curves.batches.packed_batches` of the half-edges
         leaving ``sources`` (then the jobs ``extra``), ``budget`` rows a call
-        (default: the scorer's ``row_budget``)."""
+        (default: the budget of the scorer's layout)."""
         def jobs():  # listed at the first batch: the time it takes counts as the batches'
             yield from self.stencils.collapse_jobs(sources, targets)
             yield from extra
@@ -344,8 +344,8 @@ class CurveEngine:
 
     def score_candidates(self, cands: list[CandidateStencil]) -> tuple[np.ndarray, list[CandidateCost]]:
         """``(delta, costs)`` of located candidates, in batches of about the
-        scorer's ``row_budget`` rows."""
-        _, delta, costs = self.score_batches(located_batches(cands, self.scorer.row_budget))
+        scorer's layout's budget of rows."""
+        _, delta, costs = self.score_batches(located_batches(cands, self.scorer.layout.budget))
         return delta, costs
 
     def score_batches(self, batches):

@@ -41,7 +41,7 @@ class Scorer:
       n_vertices: vertices of the initial triangulation (default ``n``).
 
     Its calls are shaped by :attr:`layout` (:func:`~otjax.curves.scoring.layout_for`)
-    and filled to its ``budget`` rows (:attr:`row_budget`).
+    and filled to its ``budget`` rows.
 
     Which rows the kernel locates changes no score: a located row is the
     exact perturbed location wherever it is found.
@@ -54,7 +54,6 @@ class Scorer:
         self.layout = scoring.layout_for(len(points), n_vertices or len(points))
         self.pipeline = KernelPipeline(self.layout.fields, scoring.score_packed, scoring.SHAPES, dtype,
                                        static={"edges_per_row": self.layout.edges_per_row})
-        self.row_budget = self.layout.budget
         self.location_kernel_used = False
         # Locate batches on the host before their call (see PROBE).
         self.host_first = False
@@ -157,13 +156,13 @@ class Scorer:
           parts: per edge, a tuple of point-id arrays (concatenated in order).
           edge_xy: ``(m, 2, 2)`` endpoints of each edge, lower id first.
           budget: rows per call (whole edges per batch, within the shapes the
-            decimation loop uses anyway; default :attr:`row_budget`); each
+            decimation loop uses anyway; default the layout's budget); each
             batch is dispatched before the last is read.
 
         Returns:
           ``(m, 6)`` the kernel's per-edge fields (:data:`scoring.EDGE_FIELDS`).
         """
-        budget = budget or self.row_budget
+        budget = budget or self.layout.budget
         counts = np.fromiter((sum(map(len, p)) for p in parts), np.int64, len(parts))
 
         def batches():
