@@ -203,7 +203,7 @@ def compare_sizes(sizes, exe: Path, work: Path, cache: Path, cold: bool) -> list
 def size_table(rows: list[dict]) -> str:
     """Markdown: wall seconds per size, both tools."""
     out = ["| noisy star, points → V | reference s | otjax s (warm cache) | otjax s (cold) | "
-           "corner error mean, reference / otjax (% D) |", "| --- | --- | --- | --- | --- |"]
+           "corner error mean, seed 0, reference / otjax (% D) |", "| --- | --- | --- | --- | --- |"]
     for r in rows:
         cold = f"{r['otjax_cold_seconds']:.1f}" if "otjax_cold_seconds" in r else ""
         out.append(f"| {r['n_points']} → {r['n_vertices']} | {r['reference_seconds']:.1f} | "
