@@ -50,7 +50,8 @@ Drivers:
   L-BFGS refinement on the fixed-assignment cost.
 - :func:`reconstruct_curve`, :class:`CurveResult` -- the pipeline and its
   result (also at the top level, ``otjax.reconstruct_curve``);
-  :func:`default_initial_vertices` -- its default initial subset size.
+  :func:`default_initial_vertices` -- its default initial subset size, by
+  :func:`local_thickness` (noisy points or exact samples).
 
 Scoring runs in JAX's float64 mode (exact point location): research code
 calls these inside ``jax.enable_x64(True)`` (``reconstruct_curve`` does it
@@ -85,6 +86,7 @@ from otjax.curves.refinement import minimize_lbfgs, refine
 from otjax.curves.relocation import optimal_position
 from otjax.curves.result import CurveResult
 from otjax.curves.stencils import CandidateCost, CandidateStencil
+from otjax.curves.thickness import local_thickness
 from otjax.curves.triangulation import CollapsePlan, MovePlan, Triangulation, edge_key
 from otjax.stencil import Buckets, EdgeStencil, pack_edge_stencils
 
@@ -110,6 +112,7 @@ __all__ = [
     "default_initial_vertices",
     "edge_key",
     "fixed_assignment_cost",
+    "local_thickness",
     "mass_before_rank",
     "mass_before_sort",
     "minimize_lbfgs",

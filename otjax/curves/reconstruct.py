@@ -24,6 +24,7 @@ from otjax.curves.engine import CurveEngine
 from otjax.curves.plan import TransportPlan
 from otjax.curves.plan_result import result_from_plan
 from otjax.curves.refinement import refine as refine_positions
+from otjax.curves.thickness import local_thickness
 from otjax.curves.result import CurveResult
 from otjax.curves.triangulation import Triangulation
 from otjax.decimation.relocation import relocate
@@ -33,8 +34,11 @@ from otjax.validation import check_number, check_points, check_target
 
 BACKGROUNDS = ("auto", "none")
 # The size rules of the defaults (docs/decisions.md#default_initial_vertices, #default_queue).
-INITIAL_FLOOR = 2000
+INITIAL_CAP = 2000
+INITIAL_FLOOR = 300
+POINTS_PER_INITIAL_VERTEX = 3
 INITIAL_PER_VERTEX = 20
+NOISY_THICKNESS = 0.5
 EXHAUSTIVE_COLLAPSES = 4000
 LAZY_COLLAPSES = 1500
 # During a run the youngest GC generation is collected every this many
@@ -112,7 +116,7 @@ def reconstruct_curve(points, masses=None, n_vertices: int | None = None, *, tol
     """
     t_start = time.perf_counter()
     points, masses = check_points(points, masses, dim=2, merge_duplicates=merge_duplicates)
-    params = _check_params(len(points), n_vertices=n_vertices, tolerance=tolerance, relevance=relevance,
+    params = _check_params(points, n_vertices=n_vertices, tolerance=tolerance, relevance=relevance,
                            density=density, background=background, chords=chords, fit_ends=fit_ends,
                            relocation=relocation, final_relocations=final_relocations, refine=refine,
                            queue=queue, choices=choices, round_fraction=round_fraction,
@@ -172,10 +176,12 @@ def _discount_background(points, masses, mode: str):
     return noise, masses * shape_weights(noise) if noise.found else masses
 
 
-def _check_params(n_points: int, *, n_vertices, tolerance, relevance, density, background, chords, fit_ends,
+def _check_params(points: np.ndarray, *, n_vertices, tolerance, relevance, density, background, chords, fit_ends,
                   relocation, final_relocations, refine, queue, choices, round_fraction, initial_vertices, seed,
                   merge_duplicates) -> dict:
-    """The validated parameters of :func:`reconstruct_curve`, as its result's ``params``."""
+    """The validated parameters of :func:`reconstruct_curve`, as its result's ``params``
+    (``points``: the validated input, read for the default initial subset)."""
+    n_points = len(points)
     if n_vertices is None and tolerance is None:
         raise ValueError("give n_vertices (a target vertex count) or tolerance (or both)")
     if n_vertices is not None:
@@ -201,6 +207,9 @@ def _check_params(n_points: int, *, n_vertices, tolerance, relevance, density, b
         raise ValueError(f"round_fraction must be in (0, 1], got {round_fraction}")
     if initial_vertices is None:
         initial_vertices = default_initial_vertices(n_points, n_vertices)
+        if initial_vertices != default_initial_vertices(n_points, n_vertices, noisy=False):
+            if local_thickness(points) <= NOISY_THICKNESS:
+                initial_vertices = default_initial_vertices(n_points, n_vertices, noisy=False)
     initial_vertices = check_number("initial_vertices", initial_vertices, minimum=1, integer=True)
     if n_vertices is not None and initial_vertices < n_vertices:
         raise ValueError(f"initial_vertices ({initial_vertices}) must be >= n_vertices ({n_vertices})")
@@ -304,16 +313,26 @@ def _history(run: _Outcome, noise: Background | None) -> dict:
             "background_fraction": noise.fraction if noise is not None else 0.0}
 
 
-def default_initial_vertices(n_points: int, n_vertices: int | None) -> int:
+def default_initial_vertices(n_points: int, n_vertices: int | None, noisy: bool = True) -> int:
     """Initial vertex count used when ``initial_vertices`` is not given.
 
-    Every point up to 2000 points; above, a random subset of 2000 points or
-    20 per target vertex, whichever is more. A larger subset mostly adds
-    collapses, and on noisy inputs it also ends less accurate
-    (docs/decisions.md#default_initial_vertices). Tolerance mode (no
-    target) uses 2000.
+    Given a target and noisy points: a random subset of a third of the
+    points, at least 300 and at most 2000 (every point up to 300 points).
+    Exact samples (``noisy`` false) and tolerance mode (no target): every
+    point up to 2000 points, else 2000. Either way 20 per target vertex
+    where that is more. On noisy points a larger subset mostly adds
+    collapses and ends less accurate; on exact samples it keeps the corners'
+    own points (docs/decisions.md#default_initial_vertices). In tolerance
+    mode every point keeps the bound from the start: no edge carries a point.
+    :func:`reconstruct_curve` calls points noisy where their
+    :func:`~otjax.curves.thickness.local_thickness` exceeds
+    :data:`NOISY_THICKNESS`.
     """
-    return min(n_points, max(INITIAL_FLOOR, INITIAL_PER_VERTEX * (n_vertices or 0)))
+    subset = INITIAL_CAP
+    if noisy and n_vertices is not None:
+        share = -(-n_points // POINTS_PER_INITIAL_VERTEX)
+        subset = min(INITIAL_CAP, max(INITIAL_FLOOR, share))
+    return min(n_points, max(subset, INITIAL_PER_VERTEX * (n_vertices or 0)))
 
 
 def default_queue(initial_vertices: int, n_vertices: int | None) -> str:

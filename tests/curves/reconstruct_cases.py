@@ -76,12 +76,21 @@ def check_junctions(result, truth):
         assert np.any(near & (deg == 1)), f"open end {end} lost"
 
 
-def skyline_case(**mode):
+def _skyline():
     pts, truth = datasets.skyline(SKYLINE_POINTS, noise=0.005, seed=6)
-    n = len(truth["corners"]) + len(truth["ends"])
-    with_reloc = otjax.reconstruct_curve(pts, n_vertices=n, relocation=100, final_relocations=1, **mode)
+    return pts, truth, len(truth["corners"]) + len(truth["ends"])
+
+
+def skyline_run(**mode):
+    """The skyline reconstructed with relocation (as in :func:`skyline_case`)."""
+    pts, _, n = _skyline()
+    return otjax.reconstruct_curve(pts, n_vertices=n, relocation=100, final_relocations=1, **mode)
+
+
+def skyline_case(**mode):
+    pts, truth, n = _skyline()
     without = otjax.reconstruct_curve(pts, n_vertices=n, relocation=0, final_relocations=0, **mode)
-    return with_reloc, without, truth
+    return skyline_run(**mode), without, truth
 
 
 def check_skyline(with_reloc, without, truth):

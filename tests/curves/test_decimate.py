@@ -122,8 +122,10 @@ def test_prefetching_the_next_draw_changes_nothing_but_the_caches():
 
 def test_multiple_choice_scores_far_fewer_candidates():
     pts, _ = otjax.datasets.star(600, noise=0.01, seed=9)
-    mc = otjax.reconstruct_curve(pts, n_vertices=10, queue="multiple-choice", relocation=0)
-    ex = otjax.reconstruct_curve(pts, n_vertices=10, queue="exhaustive", relocation=0)
+    # Every point a vertex: a run long enough that the exhaustive end (from
+    # 5x the target on) is a small part of it.
+    mc = otjax.reconstruct_curve(pts, n_vertices=10, queue="multiple-choice", relocation=0, initial_vertices=600)
+    ex = otjax.reconstruct_curve(pts, n_vertices=10, queue="exhaustive", relocation=0, initial_vertices=600)
     assert mc.history["switched_at"] == 50
     # A step scores at most `choices` half-edges until the switch. Updates
     # on changed link edges (exhaustive loop) count as evaluations too.

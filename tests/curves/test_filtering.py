@@ -1,6 +1,8 @@
 """Edge filters decided by the data (otjax.curves.filtering), alone and at
 the defaults of reconstruct_curve."""
 
+import itertools
+
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -256,12 +258,31 @@ def test_the_size_rule_picks_the_documented_queue():
 
 
 @pytest.mark.parametrize("n_points, target, expected", [
-    (50, 10, 50), (2000, 10, 2000),  # every point up to 2000
-    (2001, 10, 2000), (4000, 10, 2000), (4001, 10, 2000), (1_000_000, 10, 2000),  # no jump at any size
-    (3000, 150, 3000), (10_000, 150, 3000), (10_000, None, 2000),  # 20 per target vertex; tolerance mode
+    (50, 10, 50), (300, 10, 300),  # every point up to 300
+    (301, 10, 300), (900, 10, 300), (1000, 10, 334), (2000, 10, 667), (4530, 10, 1510), (4531, 10, 1511),
+    (5999, 10, 2000),  # a third
+    (6001, 10, 2000), (1_000_000, 10, 2000),  # at most 2000
+    (3000, 150, 3000), (10_000, 150, 3000),  # 20 per target vertex
 ])
 def test_the_initial_subset_rule(n_points, target, expected):
     assert default_initial_vertices(n_points, target) == expected
-    # The documented queue follows for a 10-vertex target: exhaustive up to 1510 points, lazy above.
+    # The documented queue follows for a 10-vertex target: exhaustive up to 4530 points, lazy above.
     if target == 10:
-        assert default_queue(expected, target) == ("lazy" if n_points > 1510 else "exhaustive")
+        assert default_queue(expected, target) == ("lazy" if n_points > 4530 else "exhaustive")
+
+
+@pytest.mark.parametrize("n_points, target, expected", [
+    (1000, 10, 1000), (2000, 10, 2000), (2001, 10, 2000), (1_000_000, 10, 2000), (10_000, 150, 3000),
+])
+def test_exact_samples_and_tolerance_mode_start_from_every_point_up_to_2000(n_points, target, expected):
+    assert default_initial_vertices(n_points, target, noisy=False) == expected
+    assert default_initial_vertices(n_points, None) == min(n_points, 2000)
+
+
+def test_the_initial_subset_grows_with_the_input():
+    sizes = np.arange(1, 8000)
+    for target, noisy in itertools.product((None, 10, 40), (False, True)):
+        counts = np.array([default_initial_vertices(int(n), target, noisy) for n in sizes])
+        assert np.all(np.diff(counts) >= 0)  # never fewer vertices for more points
+        assert np.all(counts <= sizes)
+        assert np.all(np.diff(counts) <= 1)  # and no jump: one more point, at most one more vertex

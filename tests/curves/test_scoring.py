@@ -7,6 +7,7 @@ batch per source, a copied engine against the original.
 """
 
 import copy
+import functools
 import logging
 import pickle
 
@@ -336,11 +337,12 @@ def test_small_inputs_fill_calls_to_the_smaller_shape_and_score_the_same(monkeyp
         (2, scoring.MIN_ROWS), (2, scoring.MIN_ROWS), (4, scoring.MIN_ROWS), (2, scoring.ROW_BUDGET),
         (4, scoring.ROW_BUDGET)]
     pts, _ = datasets.star(900, noise=0.01, seed=3)
-    small = reconstruct_curve(pts, n_vertices=10, seed=1)
+    run = functools.partial(reconstruct_curve, pts, n_vertices=10, seed=1, initial_vertices=900)  # one point a vertex
+    small = run()
     monkeypatch.setattr(scoring, "DENSE_VERTICES", 0)
-    quarter = reconstruct_curve(pts, n_vertices=10, seed=1)
+    quarter = run()
     monkeypatch.setattr(scoring, "SMALL_INPUT_POINTS", 0)
-    large = reconstruct_curve(pts, n_vertices=10, seed=1)
+    large = run()
     # The layouts did differ: fewer calls with more edges per call, fewer with a larger budget.
     assert quarter.history["kernel_calls"] > small.history["kernel_calls"]
     assert quarter.history["kernel_calls"] > large.history["kernel_calls"]
