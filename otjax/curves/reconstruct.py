@@ -24,8 +24,8 @@ from otjax.curves.engine import CurveEngine
 from otjax.curves.plan import TransportPlan
 from otjax.curves.plan_result import result_from_plan
 from otjax.curves.refinement import refine as refine_positions
-from otjax.curves.thickness import local_thickness
 from otjax.curves.result import CurveResult
+from otjax.curves.thickness import local_thickness
 from otjax.curves.triangulation import Triangulation
 from otjax.decimation.relocation import relocate
 from otjax.frame import Frame, to_canonical
