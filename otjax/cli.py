@@ -89,8 +89,7 @@ def _curve_parser(sub) -> argparse.ArgumentParser:
                    f"up to {LAZY_COLLAPSES}, lazy up to {EXHAUSTIVE_COLLAPSES} with a target, multiple-choice above)")
     p.add_argument("--choices", type=int, metavar="K", help="multiple-choice: half-edges drawn per step (15)")
     p.add_argument("--initial-vertices", type=int, metavar="V",
-                   help="random subset of the points used as initial vertices (default: a third of noisy "
-                        "points, 300 to 2000; every exact sample up to 2000)")
+                   help="initial vertices, a random subset (default: a third of noisy points, 300-2000)")
     p.add_argument("--round-fraction", type=float, metavar="F",
                    help="parallel: a round collapses at most this fraction of what is left (0.05)")
     p.add_argument("--seed", type=int, metavar="S", help="random seed (examples: also the sampling seed)")
