@@ -37,12 +37,16 @@ def local_thickness(points: np.ndarray, neighbours: int = NEIGHBOURS) -> float:
     if neighbours < 3:
         raise ValueError(f"neighbours must be at least 3, got {neighbours}")
     k = min(neighbours, len(points))
-    centred = points - points.mean(0)
+    # Unit scale, so that squares neither overflow nor underflow at any input units.
+    centred = points - (points.max(0) / 2 + points.min(0) / 2)
+    extent = np.abs(centred).max()
+    if extent > 0:
+        centred = centred / extent
     _, nearest = cKDTree(centred).query(centred, k)
     local = centred[nearest]
     local = local - local.mean(1, keepdims=True)
     cov = np.einsum("nki,nkj->nij", local, local)
-    # Eigenvalues of a symmetric 2x2 from its trace and determinant.
+    # Eigenvalues of a symmetric 2x2: half trace plus or minus the distance from it.
     half_trace = 0.5 * (cov[:, 0, 0] + cov[:, 1, 1])
     gap = np.hypot(0.5 * (cov[:, 0, 0] - cov[:, 1, 1]), cov[:, 0, 1])
     largest = half_trace + gap

@@ -37,7 +37,7 @@ def test_matches_a_brute_force_oracle(n, k, spread, seed):
     assert local_thickness(points, k) == pytest.approx(brute_force_thickness(points, k), abs=1e-6)
 
 
-@pytest.mark.parametrize("scale", [1e-9, 1.0, 3e7])
+@pytest.mark.parametrize("scale", [1e-170, 1e-9, 1.0, 3e7, 1e170])
 def test_independent_of_units_position_and_orientation(scale):
     pts, _ = datasets.star(800, noise=0.003, seed=2)
     angle = 0.7
