@@ -31,7 +31,8 @@ def sweep(points: int, budgets, seed: int) -> list[dict]:
     rows = []
     for budget in budgets:
         t0 = time.perf_counter()
-        result = otjax.reconstruct_curve(pts, n_vertices=budget)
+        # Every solid edge: the automatic background discount and filters off.
+        result = otjax.reconstruct_curve(pts, n_vertices=budget, background="none", chords=False)
         seconds = time.perf_counter() - t0
         filters = [("relevance", v, result.filtered(relevance=v)) for v in RELEVANCE]
         filters += [("density", v, result.filtered(density=v)) for v in DENSITY]
