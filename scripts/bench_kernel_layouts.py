@@ -109,7 +109,6 @@ def main(argv=None) -> int:
     import jax
 
     from otjax.curves import scoring
-    from otjax.curves.reconstruct import default_initial_vertices
 
     jax.config.update("jax_enable_x64", True)
     rows = []
@@ -124,8 +123,8 @@ def main(argv=None) -> int:
             if not (np.array_equal(res.vertices, first.vertices) and np.array_equal(res.edges, first.edges)):
                 raise SystemExit(f"{spec}: layout {name} changed the reconstruction")
         seconds = replay({name: kept for name, (_, kept) in runs.items()}, args.passes)
-        n, nv = (int(x) for x in spec.split(":")[2:])
-        default = f"R/{scoring.layout_for(n, default_initial_vertices(n, nv)).edges_per_row}"
+        n = int(spec.split(":")[2])
+        default = f"R/{scoring.layout_for(n, first.params['initial_vertices']).edges_per_row}"
         row = {"input": spec, "calls": {k: res.history["kernel_calls"] for k, (res, _) in runs.items()},
                "kernel_seconds": {k: args.every * v for k, v in seconds.items()}, "default": default}
         rows.append(row)

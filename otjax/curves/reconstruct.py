@@ -206,10 +206,11 @@ def _check_params(points: np.ndarray, *, n_vertices, tolerance, relevance, densi
     if not 0 < round_fraction <= 1:
         raise ValueError(f"round_fraction must be in (0, 1], got {round_fraction}")
     if initial_vertices is None:
+        exact = default_initial_vertices(n_points, n_vertices, noisy=False)
         initial_vertices = default_initial_vertices(n_points, n_vertices)
-        if initial_vertices != default_initial_vertices(n_points, n_vertices, noisy=False):
-            if local_thickness(points) <= NOISY_THICKNESS:
-                initial_vertices = default_initial_vertices(n_points, n_vertices, noisy=False)
+        # The thickness is measured only where the two rules differ.
+        if initial_vertices != exact and local_thickness(points) <= NOISY_THICKNESS:
+            initial_vertices = exact
     initial_vertices = check_number("initial_vertices", initial_vertices, minimum=1, integer=True)
     if n_vertices is not None and initial_vertices < n_vertices:
         raise ValueError(f"initial_vertices ({initial_vertices}) must be >= n_vertices ({n_vertices})")
