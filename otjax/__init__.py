@@ -36,14 +36,20 @@ Surfaces (3D, Digne et al. 2014):
   later processes (the command line does by default).
 """
 
-from otjax import (batch, curves, datasets, datasets3d, decimation, io3d, lp, metrics, metrics3d, stencil,
-                   surfaces)
+import importlib
+
+from otjax import batch, curves, datasets, decimation, metrics, stencil
 from otjax.background import Background, estimate_background
 from otjax.compile_cache import enable_compilation_cache
 from otjax.curves.reconstruct import reconstruct_curve
 from otjax.curves.result import CurveResult
 from otjax.io import image_to_points, read_points
-from otjax.surfaces.features import recover_features
+
+# The 3D half is imported on first use (PEP 562): a curve command or script
+# does not pay for loading it.
+_LAZY = {"datasets3d": ("otjax.datasets3d", None), "io3d": ("otjax.io3d", None), "lp": ("otjax.lp", None),
+         "metrics3d": ("otjax.metrics3d", None), "surfaces": ("otjax.surfaces", None),
+         "recover_features": ("otjax.surfaces.features", "recover_features")}
 
 __all__ = [
     "Background",
@@ -67,3 +73,17 @@ __all__ = [
     "surfaces",
 ]
 __version__ = "0.1.0"
+
+
+def __getattr__(name: str):
+    if name not in _LAZY:
+        raise AttributeError(f"module 'otjax' has no attribute {name!r}")
+    module, attribute = _LAZY[name]
+    value = importlib.import_module(module)
+    value = value if attribute is None else getattr(value, attribute)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(__all__))

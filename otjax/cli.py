@@ -21,7 +21,6 @@ import gc
 import sys
 
 from otjax import datasets
-from otjax.cli_surfaces import add_surface_parsers
 from otjax.compile_cache import default_cache_dir, enable_compilation_cache
 from otjax.curves.decimate import QUEUES
 from otjax.curves.reconstruct import EXHAUSTIVE_COLLAPSES, LAZY_COLLAPSES, reconstruct_curve
@@ -112,15 +111,34 @@ def _curve_parser(sub) -> argparse.ArgumentParser:
     return p
 
 
-def build_parser() -> argparse.ArgumentParser:
-    """The ``otjax`` argument parser (subcommands: ``curve``, ``surface``, ``recover``)."""
+# The surface commands and their one-line help. Their full parsers load the
+# 3D half of the package, so they are built only for a surface command: the
+# others list them by name (``otjax --help``) and never import it.
+SURFACE_COMMANDS = {"surface": "reconstruct a 3D surface from points",
+                    "recover": "pull a smooth mesh onto the sharp features of its points"}
+
+
+def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
+    """The ``otjax`` argument parser (subcommands: ``curve``, ``surface``, ``recover``).
+
+    ``argv`` (default ``sys.argv[1:]``) decides only whether the surface
+    commands get their full parsers or are listed by name.
+    """
     from otjax import __version__
 
     parser = argparse.ArgumentParser(prog="otjax", description="Shape reconstruction by optimal transport.")
     parser.add_argument("--version", action="version", version=f"otjax {__version__}")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     _curve_parser(sub)
-    add_surface_parsers(sub)
+    args = sys.argv[1:] if argv is None else argv
+    command = next((a for a in args if not a.startswith("-")), None)
+    if command in SURFACE_COMMANDS:
+        from otjax.cli_surfaces import add_surface_parsers
+
+        add_surface_parsers(sub, SURFACE_COMMANDS)
+    else:
+        for name, text in SURFACE_COMMANDS.items():
+            sub.add_parser(name, help=text)
     return parser
 
 
@@ -220,7 +238,7 @@ def _render(result, path):
 
 def main(argv: list[str] | None = None) -> int:
     """Runs the command line; returns the exit status (0 ok, 1 bad input, 2 usage, 130 interrupted)."""
-    parser = build_parser()
+    parser = build_parser(argv)
     args = parser.parse_args(argv)
     try:
         return args.run(args, args.usage)

@@ -44,9 +44,10 @@ def _outputs(p: argparse.ArgumentParser) -> None:
     p.add_argument("--quiet", action="store_true", help="print nothing but errors")
 
 
-def add_surface_parsers(sub) -> None:
-    """Adds ``surface`` and ``recover`` to the ``otjax`` subcommands."""
-    p = sub.add_parser("surface", help="reconstruct a 3D surface from points",
+def add_surface_parsers(sub, helps: dict[str, str]) -> None:
+    """Adds ``surface`` and ``recover`` to the ``otjax`` subcommands, with
+    their one-line ``helps`` by name."""
+    p = sub.add_parser("surface", help=helps["surface"],
                        description="Reconstruct a surface (triangles and isolated vertices) from 3D points by "
                        "optimal transport (Digne et al. 2014). Inputs: .xyz/.csv/.txt (x y z [...] per line) or "
                        ".ply point sets.")
@@ -71,7 +72,7 @@ def add_surface_parsers(sub) -> None:
     _outputs(p)
     p.set_defaults(run=_run_surface, usage=p.error)
 
-    p = sub.add_parser("recover", help="pull a smooth mesh onto the sharp features of its points",
+    p = sub.add_parser("recover", help=helps["recover"],
                        description="Feature recovery (Digne et al. 2014, section 5): move the vertices of a smooth "
                        "mesh (e.g. screened Poisson) onto the creases and boundaries of the points it was made "
                        "from, then drop the facets that receive little mass (holes the smooth method filled).")

@@ -457,6 +457,37 @@ def test_python_m_otjax_help():
     assert "--example" in proc.stdout and "--merge-duplicates" in proc.stdout
 
 
+def test_a_curve_command_never_loads_the_3d_half():
+    """The curve command, its help and the top-level help list the surface
+    commands without importing the surface package; a surface command does."""
+    probe = ("import sys, contextlib, io; import otjax.cli as c\n"
+             "for argv in ({}):\n"
+             "    with contextlib.redirect_stdout(io.StringIO()) as out, contextlib.suppress(SystemExit):\n"
+             "        c.main(argv)\n"
+             "print(sorted(m for m in ('otjax.surfaces', 'otjax.lp', 'highspy') if m in sys.modules))\n"
+             "print('surface' in out.getvalue() and 'recover' in out.getvalue())")
+
+    def loaded(argvs):
+        proc = subprocess.run([sys.executable, "-c", probe.format(argvs)], check=False, capture_output=True,
+                              text=True, timeout=120)
+        assert proc.returncode == 0, proc.stderr
+        return proc.stdout.split("\n")[:2]
+
+    assert loaded("['curve', '--list-examples'], ['--help']") == ["[]", "True"]
+    assert loaded("['curve', '--help'],") == ["[]", "False"]
+    assert loaded("['surface', '--help'],")[0] == "['highspy', 'otjax.lp', 'otjax.surfaces']"
+
+
+def test_3d_names_of_the_package_load_on_first_use():
+    import otjax
+    import otjax.surfaces.features
+
+    assert otjax.recover_features is otjax.surfaces.features.recover_features
+    assert {"surfaces", "lp", "io3d", "datasets3d", "metrics3d", "recover_features"} <= set(dir(otjax))
+    with pytest.raises(AttributeError, match="no attribute 'surface'"):
+        otjax.surface  # noqa: B018
+
+
 def test_python_m_otjax_exits_with_the_status_of_main(tmp_path):
     """The process entry (which freezes the collector before exit) passes the status on."""
     args = [sys.executable, "-m", "otjax", "curve", str(tmp_path / "missing.xy"), "-n", "3"]
