@@ -1,4 +1,4 @@
-"""Batched point-in-triangle tests: a filtered JAX kernel, exact on the host.
+"""Batched point-in-triangle tests: a filtered JAX kernel, adaptive stages, exact on the host.
 
 Exporting a collapse stencil locates every point of the star among the new
 triangles: (point, triangle) pairs by the million late in a large run, where
@@ -14,6 +14,11 @@ are therefore exactly the host predicate's, pair for pair.
 Why the filter is sound even if XLA fuses a multiply-add: the bound covers the
 rounding of both products and the subtraction; a fused evaluation rounds
 fewer times, so its error is no larger.
+
+:func:`orient_adaptive` adds Shewchuk's stages B and C in JAX, for the
+scoring kernel's rows the filter leaves unsure (exactly collinear input):
+they decide all but orientations within ~1e-32 relative of zero with inexact
+coordinate differences, which stay with the host.
 """
 
 from __future__ import annotations
@@ -88,6 +93,121 @@ def in_triangle_rows(tri, px, py, xp=jnp) -> jax.Array:
     p1, n1 = _orient_perturbed_filtered(x1, y1, x2, y2, px, py, xp)
     p2, n2 = _orient_perturbed_filtered(x2, y2, x0, y0, px, py, xp)
     return xp.where(n0 | n1 | n2, OUTSIDE, xp.where(p0 & p1 & p2, INSIDE, UNSURE)).astype(xp.int8)
+
+
+# Shewchuk's adaptive orientation (1997, orient2dadapt), its first stages:
+# the float determinant's error bounds of its stages B and C, and the
+# splitter of Dekker's exact product.
+_EPS = 2.0 ** -53
+_ERR_B = (2.0 + 12.0 * _EPS) * _EPS
+_ERR_C = (9.0 + 64.0 * _EPS) * _EPS * _EPS
+_ERR_RESULT = (3.0 + 8.0 * _EPS) * _EPS
+_SPLITTER = 134217729.0  # 2^27 + 1
+_TINY = 2.0 ** -400  # products of two larger numbers, and their tails, do not underflow
+
+
+def _two_sum(a, b):
+    """``(x, y)`` with ``x = fl(a + b)`` and ``x + y = a + b`` exactly (Knuth)."""
+    x = a + b
+    b_virtual = x - a
+    a_virtual = x - b_virtual
+    return x, (a - a_virtual) + (b - b_virtual)
+
+
+def _diff_tail(a, b, x):
+    """``y`` with ``x + y = a - b`` exactly, for ``x = fl(a - b)``."""
+    b_virtual = a - x
+    a_virtual = x + b_virtual
+    return (a - a_virtual) + (b_virtual - b)
+
+
+def _two_products(a, b, c, d):
+    """``((x, y), (z, w))``: ``x + y = a b`` and ``z + w = c d`` exactly (Dekker).
+
+    The products and the splitter's products pass an optimisation barrier:
+    the algorithm needs them rounded as written, and a compiler contracting
+    one of them into a fused multiply-add with a later subtraction would
+    break the exactness.
+    """
+    x, z, sa, sb, sc, sd = jax.lax.optimization_barrier(
+        (a * b, c * d, _SPLITTER * a, _SPLITTER * b, _SPLITTER * c, _SPLITTER * d))
+
+    def split(v, sv):
+        hi = sv - (sv - v)
+        return hi, v - hi
+
+    def tail(p, u, su, v, sv):
+        uh, ul = split(u, su)
+        vh, vl = split(v, sv)
+        return ul * vl - (((p - uh * vh) - ul * vh) - uh * vl)
+
+    return (x, tail(x, a, sa, b, sb)), (z, tail(z, c, sc, d, sd))
+
+
+def orient_adaptive(ax, ay, bx, by, px, py):
+    """Sign of ``orient(a, b, p + eps (1, eps))``, where Shewchuk's stages A-C decide it.
+
+    Stage A is the float filter; B evaluates the determinant of the rounded
+    differences exactly (a four-term expansion) and is exact when the
+    differences are; C adds the differences' first-order tails under its
+    error bound. Left undecided are the determinants C cannot bound away
+    from zero with inexact differences (points within ``~1e-32`` relative of
+    the line through ``a`` and ``b``); the host's exact predicate settles
+    those. An exactly zero determinant is decided by the perturbation, by
+    exact comparisons as in :func:`otjax.predicates.orient_perturbed`.
+
+    Args:
+      ax, ay, bx, by, px, py: ``(N,)`` float64 coordinates.
+
+    Returns:
+      ``(positive, negative)`` ``(N,)`` bool, both False where undecided.
+    """
+    acx, bcx, acy, bcy = ax - px, bx - px, ay - py, by - py
+    (left, left_tail), (right, right_tail) = _two_products(acx, bcy, acy, bcx)
+    detsum = jnp.abs(left) + jnp.abs(right)
+    # Shewchuk's Two_Two_Diff: b3 + b2 + b1 + b0 = (left + left_tail) - (right + right_tail),
+    # a nonoverlapping expansion, b3 the most significant.
+    i, b0 = _two_sum(left_tail, -right_tail)
+    j, k = _two_sum(left, i)
+    i2, b1 = _two_sum(k, -right)
+    b3, b2 = _two_sum(j, i2)
+    det = ((b0 + b1) + b2) + b3
+    exact = ((_diff_tail(ax, px, acx) == 0) & (_diff_tail(bx, px, bcx) == 0)
+             & (_diff_tail(ay, py, acy) == 0) & (_diff_tail(by, py, bcy) == 0))
+    # With exact differences the expansion is the determinant: its sign is
+    # that of the most significant non-zero term.
+    lead = jnp.where(b3 != 0, b3, jnp.where(b2 != 0, b2, jnp.where(b1 != 0, b1, b0)))
+    sure_b = jnp.abs(det) >= _ERR_B * detsum
+    tails = (acx * _diff_tail(by, py, bcy) + bcy * _diff_tail(ax, px, acx)) \
+        - (acy * _diff_tail(bx, px, bcx) + bcx * _diff_tail(ay, py, acy))
+    det_c = det + tails
+    sure_c = jnp.abs(det_c) >= _ERR_C * detsum + _ERR_RESULT * jnp.abs(det)
+    value = jnp.where(exact, lead, jnp.where(sure_b, det, det_c))
+    # The bounds assume no underflow: a difference this small (never in the
+    # normalised frame) leaves the pair to the host.
+    normal = jnp.all(jnp.stack([(d == 0) | (jnp.abs(d) > _TINY) for d in (acx, bcx, acy, bcy)]), 0)
+    # A product that rounds to zero has an exactly zero factor (no underflow).
+    zero = normal & ((exact & (lead == 0)) | ((left == 0) & (right == 0)))
+    known = normal & (exact | sure_b | sure_c)
+    up = jnp.where(ay != by, ay > by, bx > ax)
+    down = jnp.where(ay != by, ay < by, bx < ax)
+    positive = jnp.where(zero, up, known & (value > 0))
+    negative = jnp.where(zero, down, known & (value < 0))
+    return positive, negative
+
+
+def in_triangle_adaptive(tri, px, py):
+    """:func:`in_triangle_rows` decided by :func:`orient_adaptive` instead of the filter alone.
+
+    Returns:
+      ``(...)`` int8: :data:`INSIDE`, :data:`OUTSIDE` or, where an edge is
+      left undecided and none is surely outside, :data:`UNSURE`.
+    """
+    x0, y0, x1, y1, x2, y2 = tri
+    p0, n0 = orient_adaptive(x0, y0, x1, y1, px, py)
+    p1, n1 = orient_adaptive(x1, y1, x2, y2, px, py)
+    p2, n2 = orient_adaptive(x2, y2, x0, y0, px, py)
+    return jnp.where(n0 | n1 | n2, OUTSIDE, jnp.where(p0 & p1 & p2, INSIDE, UNSURE)).astype(jnp.int8)
 
 
 @jax.jit

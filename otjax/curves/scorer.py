@@ -19,8 +19,9 @@ from otjax.curves.host_location import keep_located, locate_on_host
 from otjax.curves.kernel_outputs import cut_outputs, read_costs
 from otjax.curves.stencils import CandidateCost
 
-# While the kernel keeps leaving rows unlocated (exactly collinear input),
-# batches are located on the host before their call instead of scored twice;
+# While the kernel keeps leaving rows unlocated (exactly collinear input
+# without the kernel's exact stage), batches are located on the host before
+# their call instead of scored twice;
 # every PROBE-th such batch is left to the kernel to see whether that still
 # holds (docs/decisions.md#host_first).
 PROBE = 8
@@ -28,6 +29,10 @@ PROBE = 8
 # (above, the location kernel): the batches of a small run hold ~900 rows
 # (docs/decisions.md#host_first).
 HOST_FIRST_MIN_PAIRS = 1 << 12
+# Whether the kernel locates the rows its filter is unsure of in exact
+# arithmetic (scoring._locate_exactly): no score depends on it; off, every
+# such row is left to the host (tests turn it off to exercise that path).
+EXACT_IN_KERNEL = True
 
 
 class Scorer:
@@ -53,7 +58,8 @@ class Scorer:
         self.point_rows = np.ascontiguousarray(points.T)
         self.layout = scoring.layout_for(len(points), n_vertices or len(points))
         self.pipeline = KernelPipeline(self.layout.fields, scoring.score_packed, scoring.SHAPES, dtype,
-                                       static={"edges_per_row": self.layout.edges_per_row})
+                                       static={"edges_per_row": self.layout.edges_per_row,
+                                               "exact": EXACT_IN_KERNEL})
         self.location_kernel_used = False
         # Locate batches on the host before their call (see PROBE).
         self.host_first = False
@@ -96,9 +102,9 @@ class Scorer:
     def collect(self, batch: HostBatch, handle: Handle | None) -> tuple[np.ndarray, list[CandidateCost]]:
         """``(delta, costs)`` of a dispatched batch (waits for its kernel).
 
-        Jobs with a row the kernel could not locate (its filter unsure:
-        points on or within rounding of an edge, frequent on exactly
-        collinear input) keep the rows it located, have the others located
+        Jobs with a row the kernel could not locate (an orientation its
+        adaptive stages cannot decide, or every unsure row while
+        :data:`EXACT_IN_KERNEL` is off) keep the rows it located, have the others located
         on the host, and are scored again in a batch of their own. Whether
         such rows turned up (in a batch the kernel located rows of) sets
         :attr:`host_first`.

@@ -18,8 +18,10 @@ One jitted call then
    confirmed by the filtered exact predicate of :mod:`otjax.curves.location`;
    rows whose guess fails are compacted and tested against the neighbouring
    sectors and the ears. A row is located only when the filter is *sure*
-   that it is inside, so the answer is the exact perturbed location; a row
-   left unsure is reported and the caller locates it on the host;
+   that it is inside, so the answer is the exact perturbed location. Rows
+   still unsure are tested against every triangle of their job in exact
+   arithmetic (:func:`_locate_exactly`); a row left undecided after that
+   (rare) is reported and the caller locates it on the host;
 2. assigns each point to the nearest edge of its triangle and computes the
    transport cost of every edge with :func:`otjax.curves.cost.stencil_cost`
    on the flat stencil (a point only ever names edges of its own job, so
@@ -39,7 +41,7 @@ import numpy as np
 from otjax.batch.fields import Dims, Field, FieldSpec
 from otjax.batch.pipeline import ShapePolicy
 from otjax.curves.cost import stencil_cost
-from otjax.curves.location import INSIDE, in_triangle_rows
+from otjax.curves.location import INSIDE, in_triangle_adaptive, in_triangle_rows
 from otjax.stencil import EdgeStencil
 
 # Per-edge outputs, in the order of the kernel's (E, 6) array.
@@ -62,6 +64,9 @@ SMALL_INPUT_POINTS = 20_000
 DENSE_VERTICES = 2
 JOBS_PER_ROW = 16  # J = R / 16
 RETRY_PER_ROW = 4  # rows whose guess fails: at most R / 4 get the second test
+# Rows the filter leaves unsure go through exact tests, R / EXACT_PER_ROW a
+# round (docs/decisions.md#exact_in_kernel).
+EXACT_PER_ROW = 64
 # Flipped-out triangles ("ears") tested in the kernel; a job with more is
 # located on the host (measured on a 50k-point run: 0.2% of jobs have more
 # than 4, none more than 7).
@@ -300,6 +305,48 @@ def _locate(batch: FlatBatch, px, py, need, retry_per_row: int = RETRY_PER_ROW):
     return loc
 
 
+def _locate_exactly(batch: FlatBatch, px, py, loc, per_row: int = EXACT_PER_ROW):
+    """``loc`` with the rows the filter left unsure located by exact arithmetic.
+
+    Each such row is tested against every new triangle of its job (fan and
+    ears: all of them, for a row the kernel locates) by
+    :func:`~otjax.curves.location.in_triangle_adaptive`, which decides all
+    but the orientations within ``~1e-32`` relative of zero with inexact
+    coordinate differences. On exactly collinear input, where points lie
+    within rounding of the new spokes, this locates nearly every row the
+    filter could not; a row it cannot decide stays ``-1``. In rounds of at
+    most ``R / per_row`` compacted rows, as the retries of :func:`_locate`.
+    """
+    n_rows = loc.shape[0]
+    k_rows = max(n_rows // per_row, 1)
+    n_tri = batch.tri_edges.shape[0]
+
+    def one_round(state):
+        loc, waiting = state
+        slot = jnp.where(waiting, jnp.cumsum(waiting) - 1, k_rows)
+        retry = jnp.full(k_rows, n_rows, jnp.int32).at[slot].set(jnp.arange(n_rows, dtype=jnp.int32),
+                                                                 mode="drop")
+        r = jnp.minimum(retry, n_rows - 1)
+        rj, qx, qy = batch.row_job[r], px[r], py[r]
+        lo = batch.job_fan[rj]
+        n_fan = batch.job_fan[rj + 1] - lo
+        steps = jnp.max(jnp.where(retry < n_rows, n_fan, 0)) + MAX_EARS
+
+        def test(k, found):
+            ear = jnp.take_along_axis(batch.job_ears[rj], jnp.clip(k - n_fan, 0, MAX_EARS - 1)[:, None], 1)[:, 0]
+            t = jnp.where(k < n_fan, batch.fan_tri[jnp.clip(lo + k, 0, n_tri - 1)],
+                          jnp.where(k < n_fan + MAX_EARS, ear, -1))
+            hit = (t >= 0) & (in_triangle_adaptive(batch.tri_xy[:, jnp.maximum(t, 0)], qx, qy) == INSIDE)
+            return jnp.where((found < 0) & hit, t, found)
+
+        found = jax.lax.fori_loop(0, steps, test, jnp.full(k_rows, -1, loc.dtype))
+        return loc.at[retry].set(found, mode="drop"), waiting & (slot >= k_rows)
+
+    waiting = batch.row_locate & batch.row_valid & (loc < 0)
+    loc, _ = jax.lax.while_loop(lambda state: state[1].any(), one_round, (loc, waiting))
+    return loc
+
+
 class Scores(NamedTuple):
     """What :func:`score_flat` returns (a pytree).
 
@@ -323,8 +370,9 @@ class Scores(NamedTuple):
 jax.export.register_namedtuple_serialization(Scores, serialized_name="otjax.curves.scoring.Scores")
 
 
-@functools.partial(jax.jit, static_argnames=("dtype", "retry_per_row"))
-def score_flat(batch: FlatBatch, dtype=jnp.float64, retry_per_row: int = RETRY_PER_ROW):
+@functools.partial(jax.jit, static_argnames=("dtype", "retry_per_row", "exact", "exact_per_row"))
+def score_flat(batch: FlatBatch, dtype=jnp.float64, retry_per_row: int = RETRY_PER_ROW, exact: bool = True,
+               exact_per_row: int = EXACT_PER_ROW):
     """Locates, assigns and costs a flat batch; see the module docstring.
 
     Args:
@@ -332,6 +380,9 @@ def score_flat(batch: FlatBatch, dtype=jnp.float64, retry_per_row: int = RETRY_P
       dtype: float type of the cost arithmetic (location is always float64).
       retry_per_row: a retry round takes at most ``R / retry_per_row`` of
         the rows whose guess failed (tests set it high to force rounds).
+      exact: locate the rows the filter is unsure of by exact arithmetic
+        (:func:`_locate_exactly`); off, they are all left to the host.
+      exact_per_row: an exact round takes at most ``R / exact_per_row`` rows.
 
     Returns:
       :class:`Scores`.
@@ -340,6 +391,8 @@ def score_flat(batch: FlatBatch, dtype=jnp.float64, retry_per_row: int = RETRY_P
     px, py = p[:, 0], p[:, 1]
     need = batch.row_locate & batch.row_valid
     loc = _locate(batch, px, py, need, retry_per_row)
+    if exact:
+        loc = _locate_exactly(batch, px, py, loc, exact_per_row)
     unresolved = need & (loc < 0)
     cand = jnp.where(need[:, None], batch.tri_edges[jnp.maximum(loc, 0)], batch.row_cand)
     m = jnp.where(batch.row_valid, batch.row_mass, 0).astype(dtype)
@@ -352,7 +405,8 @@ def score_flat(batch: FlatBatch, dtype=jnp.float64, retry_per_row: int = RETRY_P
     return Scores(total, per_edge, res.assignment, loc, bad)
 
 
-@functools.partial(jax.jit, static_argnames=("rows", "dtype", "edges_per_row"))
-def score_packed(floats: jax.Array, ints: jax.Array, rows: int, dtype=jnp.float64, edges_per_row: int = 4):
+@functools.partial(jax.jit, static_argnames=("rows", "dtype", "edges_per_row", "exact"))
+def score_packed(floats: jax.Array, ints: jax.Array, rows: int, dtype=jnp.float64, edges_per_row: int = 4,
+                 exact: bool = True):
     """:func:`score_flat` of the batch packed by ``FIELDS[edges_per_row]`` at capacity ``rows``."""
-    return score_flat.__wrapped__(unpack(floats, ints, rows, edges_per_row), dtype)
+    return score_flat.__wrapped__(unpack(floats, ints, rows, edges_per_row), dtype, exact=exact)

@@ -1,8 +1,11 @@
 """The filtered JAX point location against the exact host predicate."""
 
+from fractions import Fraction
+from unittest import mock
+
+import jax
 import numpy as np
 import pytest
-from unittest import mock
 
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
@@ -10,7 +13,7 @@ from hypothesis import strategies as st
 from otjax.curves import location
 from otjax.curves.location import CHUNK, MIN_PAIRS, locate_pairs
 from otjax.curves.triangulation import Triangulation
-from otjax.predicates import in_triangle_perturbed
+from otjax.predicates import in_triangle_perturbed, orient_perturbed
 from tests.point_sets import make_points
 from tests.profiles import examples  # CI count, thorough count (--hypothesis-profile=thorough)
 
@@ -165,3 +168,67 @@ def test_points_outside_their_nearest_vertex_star_are_located_exactly(seed):
     in_star = np.array([v in tri.tri[f] for v, f in zip(nearest, want)])
     assert (~in_star).sum() >= 10  # the case under test occurs
     np.testing.assert_array_equal(tri.locate(pts), want)
+
+
+def _adaptive(a, b, p):
+    """:func:`location.orient_adaptive` of ``(N, 2)`` rows, jitted, as NumPy."""
+    f = jax.jit(location.orient_adaptive)
+    pos, neg = f(a[:, 0], a[:, 1], b[:, 0], b[:, 1], p[:, 0], p[:, 1])
+    return np.asarray(pos), np.asarray(neg)
+
+
+@settings(max_examples=examples(100, 1000), deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(n=st.integers(1, 200), lattice=st.booleans(), seed=st.integers(0, 2**32 - 1))
+def test_adaptive_orientation_equals_the_exact_predicate(n, lattice, seed):
+    """On points on, within ulps of and beyond triangle edges, and on their
+    vertices, every orientation the adaptive stages decide is the exact
+    perturbed one, and the point-in-triangle codes built on them are too."""
+    tri, p = degenerate_pairs(np.random.default_rng(seed), n, lattice)
+    with jax.enable_x64(True):
+        for k in range(3):
+            a, b = tri[:, k], tri[:, (k + 1) % 3]
+            pos, neg = _adaptive(a, b, p)
+            want = orient_perturbed(a, b, p)
+            assert not np.any(pos & neg)
+            np.testing.assert_array_equal(want[pos], 1)
+            np.testing.assert_array_equal(want[neg], -1)
+        code = np.asarray(jax.jit(location.in_triangle_adaptive)(np.ascontiguousarray(tri.reshape(-1, 6).T),
+                                                                 p[:, 0], p[:, 1]))
+    inside = in_triangle_perturbed(tri, p)
+    assert np.all(inside[code == location.INSIDE])
+    assert not np.any(inside[code == location.OUTSIDE])
+
+
+def test_adaptive_orientation_decides_what_the_filter_cannot():
+    """Points rounded onto segments between random points, on lattice lines,
+    and a few ulps off them: the float filter leaves most orientations unsure;
+    the adaptive stages decide all but a handful, each as the exact predicate."""
+    rng = np.random.default_rng(7)
+    n = 30_000
+    a, b = rng.uniform(-1, 1, (n, 2)), rng.uniform(-1, 1, (n, 2))
+    p = a + rng.random(n)[:, None] * (b - a)
+    grid = slice(0, n // 3)  # exactly collinear: dyadic coordinates, exact differences
+    a[grid], b[grid] = np.round(a[grid] * 64) / 64, np.round(b[grid] * 64) / 64
+    p[grid] = a[grid] + np.round(rng.random(n // 3) * 8)[:, None] / 8 * (b[grid] - a[grid])
+    off = slice(n // 3, 2 * n // 3)
+    p[off] += rng.integers(-3, 4, (n // 3, 2)) * np.spacing(np.abs(p[off]))
+    want = orient_perturbed(a, b, p)
+    with jax.enable_x64(True):
+        pos, neg = _adaptive(a, b, p)
+        f_pos, f_neg = location._orient_perturbed_filtered(*a.T, *b.T, *p.T, xp=np)
+    assert (~(f_pos | f_neg)).mean() > 0.5
+    decided = pos | neg
+    assert decided.mean() > 0.999
+    np.testing.assert_array_equal(np.where(pos, 1, np.where(neg, -1, 0))[decided], want[decided])
+
+
+@settings(max_examples=examples(100, 1000), deadline=None)
+@given(x=st.lists(st.floats(-1e150, 1e150, allow_nan=False, allow_infinity=False), min_size=4, max_size=4))
+def test_dekker_products_are_exact(x):
+    """``x + y`` is the exact product, for factors zero or above the
+    predicate's floor (below it, the predicate leaves a pair to the host)."""
+    a, b, c, d = (np.float64(v) if abs(v) > location._TINY else np.float64(0.0) for v in x)
+    with jax.enable_x64(True):
+        products = jax.jit(location._two_products)(a, b, c, d)
+    for (x, y), (u, v) in zip(products, ((a, b), (c, d))):
+        assert Fraction(float(x)) + Fraction(float(y)) == Fraction(float(u)) * Fraction(float(v))

@@ -88,19 +88,52 @@ def test_retry_rounds_locate_what_one_round_cannot_take():
         np.testing.assert_array_equal(g, w)
 
 
-def test_fused_kernel_on_collinear_data_falls_back_exactly():
-    """Points exactly on edges: the kernel's filter is unsure, the host decides."""
+def test_exact_rounds_of_one_row_locate_what_the_filter_cannot():
+    """On a lattice the filter leaves rows unsure; the exact stage locates
+    them all, the same in rounds of one row, and as the host does."""
+    pts = make_points("grid", 64, 0)
+    engine = CurveEngine(Triangulation(np.unique(pts, axis=0)), pts, np.ones(len(pts)))
+    flat = next(engine.exports(free_vertices(engine)))
+    layout = engine.scorer.layout
+    r = flat.need(layout)
+    batch = scoring.unpack(*packed(flat, engine.plan, r, layout), r, layout.edges_per_row)
+    with jax.enable_x64(True):
+        filtered = jax.device_get(scoring.score_flat(batch, exact=False))
+        want = jax.device_get(scoring.score_flat(batch))
+        got = jax.device_get(scoring.score_flat(batch, exact_per_row=r))
+    n = len(flat.row_point)
+    assert (filtered.located[:n][flat.row_locate] < 0).sum() >= 10  # the case under test occurs
+    loc = want.located[:n]
+    assert np.all(loc[flat.row_locate] >= 0)
+    for w, g in zip(want, got):
+        np.testing.assert_array_equal(g, w)
+    locate_on_host(flat, np.arange(len(flat.row_start) - 1), engine.plan.points, engine.plan.point_rows)
+    rows = np.flatnonzero(flat.row_tri >= 0)
+    np.testing.assert_array_equal(loc[rows], flat.row_tri[rows] + flat.tri_start[flat.row_job[rows]])
+
+
+@pytest.mark.parametrize("exact", [True, False])
+def test_fused_kernel_on_collinear_data_locates_exactly(monkeypatch, exact):
+    """Points exactly on edges: the kernel's filter is unsure. Its exact
+    stage locates them in the kernel; without it, the host does. Either
+    way, the host's locations and the padded kernel's costs."""
+    monkeypatch.setattr(scorer_module, "EXACT_IN_KERNEL", exact)
     pts = make_points("grid", 64, 0)
     engine = CurveEngine(Triangulation(np.unique(pts, axis=0)), pts, np.ones(len(pts)))
     sources = free_vertices(engine)
     located = engine.candidates(sources)
+    on_host = []
+    monkeypatch.setattr(scorer_module, "locate_on_host", lambda batch, jobs, *a: on_host.append(len(jobs))
+                        or locate_on_host(batch, jobs, *a))
     cands, _delta, costs = engine.score_batches(engine.exports(sources))
+    assert (sum(on_host) == 0) == exact  # the host located rows only without the exact stage
     for h, r in zip(located, costs):
         np.testing.assert_array_equal(r.triangle, h.triangle_of_point[:h.n_inside])
     assert_costs_match(cands, costs, padded_reference(engine, located))
 
 
 def _score_grid(sources_of):
+    # Host location happens only where the kernel's exact stage is off.
     pts = make_points("grid", 64, 0)
     engine = CurveEngine(Triangulation(np.unique(pts, axis=0)), pts, np.ones(len(pts)))
     calls = engine.scorer.calls
@@ -115,6 +148,7 @@ def test_locating_on_the_host_first_changes_no_score(monkeypatch):
     def sources_of(engine):
         return free_vertices(engine)
 
+    monkeypatch.setattr(scorer_module, "EXACT_IN_KERNEL", False)
     engine, calls, (cands, delta, costs) = _score_grid(sources_of)
     assert engine.scorer.host_first
     monkeypatch.setattr(scorer_module, "PROBE", 1)  # every batch a probe: the kernel locates them all
