@@ -118,7 +118,6 @@ class _Fans(NamedTuple):
     apex: np.ndarray
     theta: np.ndarray
     ears: np.ndarray
-    few_ears: np.ndarray
 
 
 def _local_edges(jobs: list[Job], per_job: _PerJob, tris: np.ndarray, xy: np.ndarray) -> _Edges:
@@ -179,8 +178,7 @@ def _rows(jobs: list[Job], per_job: _PerJob, ucode: np.ndarray, edge_start: np.n
 def _fans(per_job: _PerJob, coords: np.ndarray, tri_start: np.ndarray) -> _Fans:
     """The new triangles of a job are its flipped-out ears, then a fan around
     one apex (the target, or the moved vertex), CCW: the fan keys the kernel
-    searches and the ears it tests.
-    ``few_ears``: whether a job's ears fit the kernel's :data:`scoring.MAX_EARS`.
+    searches and the ears it tests first (up to :data:`scoring.MAX_EARS`).
     """
     nj = len(per_job.n_tri)
     n_flip = per_job.n_flip
@@ -196,10 +194,9 @@ def _fans(per_job: _PerJob, coords: np.ndarray, tri_start: np.ndarray) -> _Fans:
     theta = angle[:nj].copy()  # a batch field: its own buffer (see _per_job)
     phi = np.mod(angle[nj:] - theta[fan_job], 4.0)
     phi[job_fan[:-1]] = 0.0
-    few = n_flip <= scoring.MAX_EARS
     slot = np.arange(scoring.MAX_EARS)
-    ears = np.where(slot < np.where(few, n_flip, 0)[:, None], tri_start[:-1, None] + slot, -1)
-    return _Fans(fan_job * 8.0 + phi, fan_tri, job_fan, apex, theta, ears, few)
+    ears = np.where(slot < n_flip[:, None], tri_start[:-1, None] + slot, -1)
+    return _Fans(fan_job * 8.0 + phi, fan_tri, job_fan, apex, theta, ears)
 
 
 class Stencils(Sequence):
@@ -256,8 +253,8 @@ def export_jobs(jobs: list[Job], plan, on_host: bool) -> HostBatch:
     Args:
       jobs: the jobs, against the current state of ``plan``.
       plan: the :class:`~otjax.curves.plan.TransportPlan` (read only).
-      on_host: locate every point here (exactly); otherwise only the points
-        of jobs with more ears than the kernel tests.
+      on_host: locate every point here (exactly); otherwise the kernel
+        locates them.
     """
     if not jobs:
         return HostBatch.empty()
@@ -277,7 +274,5 @@ def export_jobs(jobs: list[Job], plan, on_host: bool) -> HostBatch:
         before=per_job.before, n_inside=rows.n_inside)
     if on_host:
         locate_on_host(batch, np.arange(len(jobs)), points, point_rows)
-    elif not fans.few_ears.all():
-        locate_on_host(batch, np.flatnonzero(~fans.few_ears), points, point_rows)
     batch.cands = Stencils(jobs, batch, edges.keys, on_host)
     return batch

@@ -97,5 +97,6 @@ class HostBatch:
             "row_valid": Prefix(len(self.row_point), 1), "tri_xy": self.tri_xy.T, "tri_edges": self.tri_edges,
             "fan_key": self.fan_key, "fan_tri": self.fan_tri, "job_fan": self.job_fan,
             "job_apex": self.job_apex, "job_theta": self.job_theta, "job_ears": self.job_ears,
+            "job_tri": self.tri_start,
             "edge_xy": self.edge_xy, "edge_valid": Prefix(len(self.edge_job), 1), "edge_job": self.edge_job,
         }

@@ -1,9 +1,9 @@
 """Exact point location on the host, for the rows of a flat batch.
 
-The kernel locates the rows of a batch where its filter is sure
-(:func:`keep_located` takes those); :func:`locate_on_host` locates the
-others exactly, every row of a job whose ears the kernel does not test, or
-every row of a batch exported to be scored on its candidates alone.
+The kernel locates the rows of a batch where its filter or its adaptive
+stages are sure (:func:`keep_located` takes those); :func:`locate_on_host`
+locates the others exactly, or every row of a batch exported to be scored
+on its candidates alone.
 """
 
 from __future__ import annotations

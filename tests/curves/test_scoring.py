@@ -19,6 +19,7 @@ from hypothesis import strategies as st
 
 from otjax import datasets, reconstruct_curve
 from otjax.batch.fields import PackedBuffers
+from otjax.curves import export as export_module
 from otjax.curves import scorer as scorer_module
 from otjax.curves import scoring
 from otjax.curves.batches import batch_of_located, located_jobs
@@ -110,6 +111,27 @@ def test_exact_rounds_of_one_row_locate_what_the_filter_cannot():
     locate_on_host(flat, np.arange(len(flat.row_start) - 1), engine.plan.points, engine.plan.point_rows)
     rows = np.flatnonzero(flat.row_tri >= 0)
     np.testing.assert_array_equal(loc[rows], flat.row_tri[rows] + flat.tri_start[flat.row_job[rows]])
+
+
+def test_points_in_ears_beyond_the_retry_round_are_located_in_the_kernel(monkeypatch):
+    """A noise-free star with every point a vertex: collapses flip out more
+    ears than the retry round tests. The kernel locates their points (no
+    host location), as the host does, and costs them as the padded kernel."""
+    pts, _ = datasets.star(400, noise=0.0, seed=0)
+    engine = CurveEngine(Triangulation(pts), pts, np.ones(len(pts)))
+    sources = free_vertices(engine)[:120]
+    located = engine.candidates(sources)
+    on_host = []
+    for module in (scorer_module, export_module):
+        monkeypatch.setattr(module, "locate_on_host", lambda *a: on_host.append(a))
+    cands, _delta, costs = engine.score_batches(engine.exports(sources))
+    assert not on_host
+    deep = 0
+    for h, r in zip(located, costs):
+        np.testing.assert_array_equal(r.triangle, h.triangle_of_point[:h.n_inside])
+        deep += int(np.sum(r.triangle[r.triangle < len(h.plan.flipped_out)] >= scoring.MAX_EARS))
+    assert deep >= 1  # the case under test occurs
+    assert_costs_match(cands, costs, padded_reference(engine, located))
 
 
 @pytest.mark.parametrize("exact", [True, False])
