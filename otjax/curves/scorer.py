@@ -29,9 +29,10 @@ PROBE = 8
 # (above, the location kernel): the batches of a small run hold ~900 rows
 # (docs/decisions.md#host_first).
 HOST_FIRST_MIN_PAIRS = 1 << 12
-# Whether the kernel locates the rows its filter is unsure of in exact
-# arithmetic (scoring._locate_exactly): no score depends on it; off, every
-# such row is left to the host (tests turn it off to exercise that path).
+# Whether the kernel locates the rows its first tests leave (filter unsure,
+# or in an ear beyond the retry round) in an exact round
+# (scoring._locate_exactly): no score depends on it; off, every such row is
+# left to the host (tests turn it off to exercise that path).
 EXACT_IN_KERNEL = True
 
 
@@ -103,9 +104,10 @@ class Scorer:
         """``(delta, costs)`` of a dispatched batch (waits for its kernel).
 
         Jobs with a row the kernel could not locate (an orientation its
-        adaptive stages cannot decide, or every unsure row while
-        :data:`EXACT_IN_KERNEL` is off) keep the rows it located, have the others located
-        on the host, and are scored again in a batch of their own. Whether
+        adaptive stages cannot decide; while :data:`EXACT_IN_KERNEL` is
+        off, every row its first tests leave) keep the rows it located,
+        have the others located on the host, and are scored again in a
+        batch of their own. Whether
         such rows turned up (in a batch the kernel located rows of) sets
         :attr:`host_first`.
         """

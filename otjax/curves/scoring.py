@@ -19,9 +19,10 @@ One jitted call then
    rows whose guess fails are compacted and tested against the neighbouring
    sectors and the ears. A row is located only when the filter is *sure*
    that it is inside, so the answer is the exact perturbed location. Rows
-   still unsure are tested against every triangle of their job in exact
-   arithmetic (:func:`_locate_exactly`); a row left undecided after that
-   (rare) is reported and the caller locates it on the host;
+   still unlocated (unsure, or in an ear the retry does not test) are
+   tested against every triangle of their job, in exact arithmetic where
+   the filter is unsure (:func:`_locate_exactly`); a row left undecided
+   after that (rare) is reported and the caller locates it on the host;
 2. assigns each point to the nearest edge of its triangle and computes the
    transport cost of every edge with :func:`otjax.curves.cost.stencil_cost`
    on the flat stencil (a point only ever names edges of its own job, so
@@ -64,8 +65,8 @@ SMALL_INPUT_POINTS = 20_000
 DENSE_VERTICES = 2
 JOBS_PER_ROW = 16  # J = R / 16
 RETRY_PER_ROW = 4  # rows whose guess fails: at most R / 4 get the second test
-# Rows the filter leaves unsure go through exact tests, R / EXACT_PER_ROW a
-# round (docs/decisions.md#exact_in_kernel).
+# Rows the first tests leave unlocated go through the exact round,
+# R / EXACT_PER_ROW rows at a time (docs/decisions.md#exact_in_kernel).
 EXACT_PER_ROW = 64
 # Flipped-out triangles ("ears") tested in the retry round; a point in one
 # of a job's further ears is found by the exact round, which tests every
