@@ -222,8 +222,8 @@ def size_table(rows: list[dict]) -> str:
            "corner error mean, seed 0, reference / otjax (% D) |", "| --- | --- | --- | --- | --- |"]
     for r in rows:
         cold = f"{r['otjax_cold_seconds']:.1f}" if "otjax_cold_seconds" in r else ""
-        out.append(f"| {r['n_points']} → {r['n_vertices']} | {r['reference_seconds']:.1f} | "
-                   f"{r['otjax_seconds']:.1f} | {cold} | {r['reference_corner_mean']:.2f} / "
+        out.append(f"| {r['n_points']} → {r['n_vertices']} | {r['reference_seconds']:.2f} | "
+                   f"{r['otjax_seconds']:.2f} | {cold} | {r['reference_corner_mean']:.2f} / "
                    f"{r['otjax_corner_mean']:.2f} |")
     return "\n".join(out)
 
@@ -237,7 +237,7 @@ def table(rows: list[dict]) -> str:
         for tool in ("reference", "otjax"):
             q = {k: float(np.mean([r[tool][k] for r in mine])) for k in
                  ("corner_mean", "corner_max", "hausdorff", "f1", "triangles", "seconds")}
-            secs = f"{q['seconds']:.1f}"
+            secs = f"{q['seconds']:.2f}"
             cold = [r["otjax_cold_seconds"] for r in mine if "otjax_cold_seconds" in r]
             if tool == "otjax" and cold:
                 secs += f" (cold {cold[0]:.1f})"
