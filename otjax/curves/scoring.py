@@ -283,15 +283,9 @@ def _locate(batch: FlatBatch, px, py, need, retry_per_row: int = RETRY_PER_ROW):
     # rows fall back on the host there). Compacted by a cumulative sum
     # (jnp.nonzero compiled 0.2 s slower), one candidate triangle per loop
     # step (a (K, 6) block compiled 0.3 s slower per shape, same work).
-    n_rows = need.shape[0]
-    k_rows = max(n_rows // retry_per_row, 1)
+    k_rows = max(need.shape[0] // retry_per_row, 1)
 
-    def one_round(state):
-        loc, waiting = state
-        slot = jnp.where(waiting, jnp.cumsum(waiting) - 1, k_rows)
-        retry = jnp.full(k_rows, n_rows, jnp.int32).at[slot].set(jnp.arange(n_rows, dtype=jnp.int32),
-                                                                 mode="drop")
-        r = jnp.minimum(retry, n_rows - 1)
+    def find(r, _live):
         rj, rg, qx, qy = job[r], g[r], px[r], py[r]
         rlo, rhi = batch.job_fan[rj], batch.job_fan[rj + 1] - 1
         width = jnp.maximum(rhi - rlo + 1, 1)
@@ -304,10 +298,33 @@ def _locate(batch: FlatBatch, px, py, need, retry_per_row: int = RETRY_PER_ROW):
             hit = (t >= 0) & (in_triangle_rows(batch.tri_xy[:, jnp.maximum(t, 0)], qx, qy) == INSIDE)
             return jnp.where((found < 0) & hit, t, found)
 
-        found = jax.lax.fori_loop(0, tris.shape[1], test, jnp.full(k_rows, -1, tris.dtype))
+        return jax.lax.fori_loop(0, tris.shape[1], test, jnp.full(k_rows, -1, tris.dtype))
+
+    return _in_rounds(loc, need & ~ok, k_rows, find)
+
+
+def _in_rounds(loc, waiting, k_rows: int, find):
+    """``loc`` with ``find``'s answers for the ``waiting`` rows, compacted
+    ``k_rows`` to a round until each had its round.
+
+    Args:
+      loc: ``(R,)`` flat triangle of each row (``-1``: not located).
+      waiting: ``(R,)`` bool, the rows to locate.
+      k_rows: rows a round.
+      find: ``find(r, live) -> (k_rows,)`` triangles (``-1``: not found) of
+        the rows ``r (k_rows,)``, ``live`` marking the real ones.
+    """
+    n_rows = loc.shape[0]
+
+    def one_round(state):
+        loc, waiting = state
+        slot = jnp.where(waiting, jnp.cumsum(waiting) - 1, k_rows)
+        retry = jnp.full(k_rows, n_rows, jnp.int32).at[slot].set(jnp.arange(n_rows, dtype=jnp.int32),
+                                                                 mode="drop")
+        found = find(jnp.minimum(retry, n_rows - 1), retry < n_rows)
         return loc.at[retry].set(found, mode="drop"), waiting & (slot >= k_rows)
 
-    loc, _ = jax.lax.while_loop(lambda state: state[1].any(), one_round, (loc, need & ~ok))
+    loc, _ = jax.lax.while_loop(lambda state: state[1].any(), one_round, (loc, waiting))
     return loc
 
 
@@ -324,18 +341,12 @@ def _locate_exactly(batch: FlatBatch, px, py, loc, per_row: int = EXACT_PER_ROW)
     it cannot decide stays ``-1``. In rounds of at most ``R / per_row``
     compacted rows, as the retries of :func:`_locate`.
     """
-    n_rows = loc.shape[0]
-    k_rows = max(n_rows // per_row, 1)
+    k_rows = max(loc.shape[0] // per_row, 1)
 
-    def one_round(state):
-        loc, waiting = state
-        slot = jnp.where(waiting, jnp.cumsum(waiting) - 1, k_rows)
-        retry = jnp.full(k_rows, n_rows, jnp.int32).at[slot].set(jnp.arange(n_rows, dtype=jnp.int32),
-                                                                 mode="drop")
-        r = jnp.minimum(retry, n_rows - 1)
+    def find(r, live_row):
         rj, qx, qy = batch.row_job[r], px[r], py[r]
         first = batch.job_tri[rj]
-        count = jnp.where(retry < n_rows, batch.job_tri[rj + 1] - first, 0)
+        count = jnp.where(live_row, batch.job_tri[rj + 1] - first, 0)
 
         def test(k, found):
             live = k < count
@@ -347,12 +358,9 @@ def _locate_exactly(batch: FlatBatch, px, py, loc, per_row: int = EXACT_PER_ROW)
                                 lambda: code)
             return jnp.where(live & (found < 0) & (code == INSIDE), first + k, found)
 
-        found = jax.lax.fori_loop(0, jnp.max(count), test, jnp.full(k_rows, -1, loc.dtype))
-        return loc.at[retry].set(found, mode="drop"), waiting & (slot >= k_rows)
+        return jax.lax.fori_loop(0, jnp.max(count), test, jnp.full(k_rows, -1, loc.dtype))
 
-    waiting = batch.row_locate & batch.row_valid & (loc < 0)
-    loc, _ = jax.lax.while_loop(lambda state: state[1].any(), one_round, (loc, waiting))
-    return loc
+    return _in_rounds(loc, batch.row_locate & batch.row_valid & (loc < 0), k_rows, find)
 
 
 class Scores(NamedTuple):
