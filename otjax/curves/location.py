@@ -172,14 +172,14 @@ def orient_adaptive(ax, ay, bx, by, px, py):
     i2, b1 = _two_sum(k, -right)
     b3, b2 = _two_sum(j, i2)
     det = ((b0 + b1) + b2) + b3
-    exact = ((_diff_tail(ax, px, acx) == 0) & (_diff_tail(bx, px, bcx) == 0)
-             & (_diff_tail(ay, py, acy) == 0) & (_diff_tail(by, py, bcy) == 0))
+    acx_tail, bcx_tail = _diff_tail(ax, px, acx), _diff_tail(bx, px, bcx)
+    acy_tail, bcy_tail = _diff_tail(ay, py, acy), _diff_tail(by, py, bcy)
+    exact = (acx_tail == 0) & (bcx_tail == 0) & (acy_tail == 0) & (bcy_tail == 0)
     # With exact differences the expansion is the determinant: its sign is
     # that of the most significant non-zero term.
     lead = jnp.where(b3 != 0, b3, jnp.where(b2 != 0, b2, jnp.where(b1 != 0, b1, b0)))
     sure_b = jnp.abs(det) >= _ERR_B * detsum
-    tails = (acx * _diff_tail(by, py, bcy) + bcy * _diff_tail(ax, px, acx)) \
-        - (acy * _diff_tail(bx, px, bcx) + bcx * _diff_tail(ay, py, acy))
+    tails = (acx * bcy_tail + bcy * acx_tail) - (acy * bcx_tail + bcx * acy_tail)
     det_c = det + tails
     sure_c = jnp.abs(det_c) >= _ERR_C * detsum + _ERR_RESULT * jnp.abs(det)
     value = jnp.where(exact, lead, jnp.where(sure_b, det, det_c))

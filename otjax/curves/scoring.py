@@ -396,7 +396,8 @@ def score_flat(batch: FlatBatch, dtype=jnp.float64, retry_per_row: int = RETRY_P
       dtype: float type of the cost arithmetic (location is always float64).
       retry_per_row: a retry round takes at most ``R / retry_per_row`` of
         the rows whose guess failed (tests set it high to force rounds).
-      exact: locate the rows the filter is unsure of by exact arithmetic
+      exact: locate the rows the guess and retry leave (filter unsure, or
+        in an ear the retry does not test) in the exact round
         (:func:`_locate_exactly`); off, they are all left to the host.
       exact_per_row: an exact round takes at most ``R / exact_per_row`` rows.
 
